@@ -1,0 +1,1 @@
+"""Inverse design on top of jaxrod (issue 5)."""

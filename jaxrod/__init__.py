@@ -1,0 +1,39 @@
+"""jaxrod: differentiable statics and dynamics of creased, snapping elastic strips."""
+
+import importlib.metadata
+
+from ._energy.geometry import discretize as discretize
+from ._energy.lagrangian import lagrangian as lagrangian
+from ._equilibrium import Newton as Newton
+from ._equilibrium import solve_equilibrium as solve_equilibrium
+from ._initial import buckled_guess as buckled_guess
+from ._initial import initial_state as initial_state
+from ._kkt import BorderedTridiagonal as BorderedTridiagonal
+from ._observables import arclength as arclength
+from ._observables import bending_energy as bending_energy
+from ._observables import compression as compression
+from ._observables import curvature as curvature
+from ._observables import energies as energies
+from ._observables import fold_height as fold_height
+from ._observables import node_positions as node_positions
+from ._observables import strains as strains
+from ._observables import tangent_angles as tangent_angles
+from ._rod import Clamps as Clamps
+from ._rod import Gravity as Gravity
+from ._rod import make_scene as make_scene
+from ._rod import Mesh as Mesh
+from ._rod import Scene as Scene
+from ._rod import Stretching as Stretching
+from ._rod import Strip as Strip
+from ._solution import Equilibrium as Equilibrium
+from ._solution import RESULTS as RESULTS
+from ._stability import dense_reduced_hessian as dense_reduced_hessian
+from ._stability import hessian as hessian
+from ._stability import Stability as Stability
+from ._stability import stability as stability
+
+
+try:
+    __version__ = importlib.metadata.version("jaxrod")
+except importlib.metadata.PackageNotFoundError:  # running from a source tree
+    __version__ = "0.0.0"

@@ -1,0 +1,89 @@
+r"""The condensed Lagrangian that statics, stability and gradients all differentiate.
+
+Unknowns: segment angles $\theta\in\mathbb R^N$ and the end force $\mu\in\mathbb R^2$,
+the force the right clamp exerts on the strip (compression: $\mu_x<0$). Segment $i$ has
+stretched length $h_i(1+\varepsilon_i)$, tangent $t_i=(\cos\theta_i,\sin\theta_i)$.
+With gravity $g$ on the lumped node masses $m_j$ and $W_i=g\sum_{j\ge i,\,j<N} m_j$,
+
+$$\mathcal L = E_b(\theta) + \sum_i \tfrac K2 h_i\varepsilon_i^2
+ + \sum_i h_i(1+\varepsilon_i)\,a_i(\theta_i,\mu) + \mu_x G,\qquad
+ a_i = W_i\sin\theta_i - \mu\cdot t_i .$$
+
+Stationarity in $\mu$ is the end condition $\sum_i h_i(1+\varepsilon_i)t_i=(G,0)$.
+$\varepsilon$ enters quadratically and is eliminated exactly, $\varepsilon_i=-a_i/K$
+(tension $\mu\cdot t_i$ over $K$), giving
+
+$$\tilde{\mathcal L}(\theta,\mu) = E_b + \sum_i h_i a_i - \sum_i \frac{h_i a_i^2}{2K} + \mu_x G .$$
+
+Its Hessian is tridiagonal in $\theta$, bordered by two columns in $\mu$; the inextensible
+strip is $K=\infty$ (the last sum dropped).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from .bending import bending_energy
+from .geometry import discretize
+
+
+def gravity_weights(scene, d):
+    """$W_i = g\\sum_{j=i}^{N-1} m_j$: weight carried by segment i (fixed end nodes excluded)."""
+    if scene.gravity is None:
+        return None
+    m = d.node_mass.at[0].set(0.0).at[-1].set(0.0)
+    tail = jnp.cumsum(m[::-1])[::-1]  # tail[j] = sum_{k>=j} m_k
+    return scene.gravity.g * tail[1:]  # segment i (1-based) -> nodes i..N-1
+
+
+def axial_load(theta, mu, scene, d):
+    a = -(mu[0] * jnp.cos(theta) + mu[1] * jnp.sin(theta))
+    W = gravity_weights(scene, d)
+    if W is not None:
+        a = a + W * jnp.sin(theta)
+    return a
+
+
+def strains(theta, mu, scene, d):
+    r"""Axial strains $\varepsilon_i=-a_i/K$ (zero when inextensible)."""
+    if scene.stretching is None:
+        return jnp.zeros_like(theta)
+    return -axial_load(theta, mu, scene, d) / scene.stretching.stiffness
+
+
+def lagrangian(theta, mu, scene, d=None):
+    r"""$\tilde{\mathcal L}(\theta,\mu)$, see the module docstring."""
+    if d is None:
+        d = discretize(scene)
+    a = axial_load(theta, mu, scene, d)
+    out = bending_energy(theta, scene, d) + jnp.sum(d.h * a) + mu[0] * scene.clamps.gap
+    if scene.stretching is not None:
+        out = out - jnp.sum(d.h * a**2) / (2.0 * scene.stretching.stiffness)
+    return out
+
+
+def positions(theta, mu, scene, d=None):
+    r"""Node positions $r_i=\sum_{j\le i}h_j(1+\varepsilon_j)t_j$, shape (N+1, 2)."""
+    if d is None:
+        d = discretize(scene)
+    eps = strains(theta, mu, scene, d)
+    e = (d.h * (1.0 + eps))[:, None] * jnp.stack([jnp.cos(theta), jnp.sin(theta)], -1)
+    return jnp.concatenate([jnp.zeros((1, 2), e.dtype), jnp.cumsum(e, axis=0)], axis=0)
+
+
+def energies(theta, mu, scene, d=None):
+    """Bending, stretching and gravitational energies (a dict of scalars)."""
+    if d is None:
+        d = discretize(scene)
+    out = {"bending": bending_energy(theta, scene, d)}
+    if scene.stretching is not None:
+        eps = strains(theta, mu, scene, d)
+        out["stretching"] = 0.5 * scene.stretching.stiffness * jnp.sum(d.h * eps**2)
+    else:
+        out["stretching"] = jnp.zeros((), theta.dtype)
+    if scene.gravity is not None:
+        y = positions(theta, mu, scene, d)[:, 1]
+        out["gravity"] = scene.gravity.g * jnp.sum(d.node_mass[1:-1] * y[1:-1])
+    else:
+        out["gravity"] = jnp.zeros((), theta.dtype)
+    return out

@@ -1,0 +1,229 @@
+r"""Equilibria by Newton's method on the autodiff Hessian of $\tilde{\mathcal L}(\theta,\mu)$.
+
+Each iteration solves the KKT system $\mathsf K\,(p,q) = -\nabla\tilde{\mathcal L}$ with
+the bordered tridiagonal structure of `_kkt.py` in $O(N)$.
+
+With `minimize=True` (default) the iteration is globalized so it reaches a local
+minimum from a rough guess, not a saddle:
+* inertia correction: if the constrained Hessian has $\nu(0)>0$ negative eigenvalues,
+  $\delta\,I$ is added to the $\theta\theta$ block, with the smallest $\delta$ of a
+  geometric ladder that makes $\nu(-\delta)=0$ (one vectorized Sturm count for the whole
+  ladder);
+* backtracking on the augmented-Lagrangian merit
+  $\phi(\theta)=\tilde{\mathcal L}(\theta,\mu^+) + \tfrac\rho2|\nabla_\mu\tilde{\mathcal L}(\theta,\mu^+)|^2$,
+  where a full step that halves the KKT residual is always accepted.
+
+With `minimize=False` it is plain Newton (for following unstable branches).
+
+Derivatives of the solution with respect to any float leaf of the scene are by the
+implicit function theorem (one extra structured solve, `lax.custom_linear_solve`),
+never by unrolling the iterations.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+from jax import lax
+
+from . import _kkt
+from ._energy.geometry import discretize, scene_dtype
+from ._energy.lagrangian import lagrangian
+from ._solution import RESULTS, Equilibrium
+
+
+class Newton(eqx.Module):
+    """Newton settings.
+
+    **Arguments:**
+    - `max_steps`: iteration cap (the `max_steps_reached` code beyond it).
+    - `gtol`: convergence when $\\max_i|\\partial\\tilde{\\mathcal L}/\\partial\\theta_i|\\,L/B$
+      and $\\max|\\partial\\tilde{\\mathcal L}/\\partial\\mu|/L$ are below it. Default:
+      `1e-9` in float64, `1e-3` in float32.
+    - `minimize`: globalize toward a local minimum (inertia correction + line search).
+    - `max_backtracks`: line-search halvings before `line_search_failed`.
+    """
+
+    max_steps: int = eqx.field(static=True, default=100)
+    gtol: float | None = eqx.field(static=True, default=None)
+    minimize: bool = eqx.field(static=True, default=True)
+    max_backtracks: int = eqx.field(static=True, default=30)
+
+
+def _float_scene(scene):
+    dtype = scene_dtype(scene)
+    return jtu.tree_map(lambda x: jnp.asarray(x, dtype) if eqx.is_array_like(x) else x, scene)
+
+
+def _grad_fn(scene):
+    d = discretize(scene)
+    return lambda t, m: jax.grad(lagrangian, argnums=(0, 1))(t, m, scene, d)
+
+
+def _residual(g, scene):
+    st = scene.strip
+    rt = jnp.max(jnp.abs(g[0])) * st.length / st.bending_stiffness
+    rm = jnp.max(jnp.abs(g[1])) / st.length
+    return jnp.maximum(rt, rm)
+
+
+_DELTAS = 10.0 ** jnp.arange(-8, 5)  # inertia-correction ladder, relative to max|diag T|
+
+
+def _newton(scene, theta0, mu0, solver: Newton):
+    dtype = theta0.dtype
+    gtol = solver.gtol if solver.gtol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
+    d = discretize(scene)
+    grad_fn = _grad_fn(scene)
+    st = scene.strip
+    rho = 100.0 * st.bending_stiffness / st.length**3
+
+    def L(t, m):
+        return lagrangian(t, m, scene, d)
+
+    def merit(t, m):
+        gm = jax.grad(lagrangian, argnums=1)(t, m, scene, d)
+        return L(t, m) + 0.5 * rho * jnp.sum(gm**2)
+
+    def cond(c):
+        return ~c["done"]
+
+    def body(c):
+        t, m = c["theta"], c["mu"]
+        g = grad_fn(t, m)
+        res = _residual(g, scene)
+        K = _kkt.assemble(grad_fn, t, m)
+        if solver.minimize:
+            scale = jnp.max(jnp.abs(K.diag))
+            deltas = jnp.concatenate([jnp.zeros(1, dtype), scale * _DELTAS.astype(dtype)])
+            ok = _kkt.count_below(K, -deltas) == 0
+            delta = jnp.where(jnp.any(ok), deltas[jnp.argmax(ok)], deltas[-1])
+        else:
+            delta = jnp.zeros((), dtype)
+        p, q = _kkt.solve(K, -g[0], -g[1], shift=-delta)
+        if solver.minimize:
+            m_new = m + q
+            f0 = merit(t, m_new)
+            slope = jax.jvp(lambda tt: merit(tt, m_new), (t,), (p,))[1]
+            slope = jnp.minimum(slope, 0.0)
+
+            def accept(step):
+                tt = t + step * p
+                f = merit(tt, m_new)
+                armijo = f <= f0 + 1e-4 * step * slope
+                return jnp.isfinite(f) & armijo
+
+            full_res = _residual(grad_fn(t + p, m + q), scene)
+            full_ok = (full_res <= 0.5 * res) & jnp.isfinite(full_res)
+
+            def ls_cond(s):
+                step, k = s
+                return (~accept(step)) & (k < solver.max_backtracks)
+
+            def ls_body(s):
+                step, k = s
+                return 0.5 * step, k + 1
+
+            step, k = lax.cond(
+                full_ok,
+                lambda: (jnp.ones((), dtype), jnp.zeros((), jnp.int32)),
+                lambda: lax.while_loop(ls_cond, ls_body, (jnp.ones((), dtype), jnp.zeros((), jnp.int32))),
+            )
+            ls_failed = (k >= solver.max_backtracks) & ~full_ok
+            t_new, m_upd = t + step * p, m + step * q
+        else:
+            ls_failed = jnp.zeros((), bool)
+            t_new, m_upd = t + p, m + q
+        converged = res <= gtol
+        finite = jnp.all(jnp.isfinite(t_new)) & jnp.all(jnp.isfinite(m_upd)) & jnp.isfinite(res)
+        steps = c["steps"] + 1
+        result = RESULTS.where(
+            converged,
+            RESULTS.successful,
+            RESULTS.where(
+                ~finite,
+                RESULTS.nonfinite,
+                RESULTS.where(
+                    ls_failed,
+                    RESULTS.line_search_failed,
+                    RESULTS.where(steps >= solver.max_steps, RESULTS.max_steps_reached, RESULTS.successful),
+                ),
+            ),
+        )
+        stop = converged | ~finite | ls_failed | (steps >= solver.max_steps)
+        keep = converged | ~finite
+        return dict(
+            theta=jnp.where(keep, t, t_new),
+            mu=jnp.where(keep, m, m_upd),
+            steps=jnp.where(converged, c["steps"], steps),
+            done=stop,
+            result=result,
+        )
+
+    init = dict(theta=theta0, mu=mu0, steps=jnp.zeros((), jnp.int32), done=jnp.zeros((), bool),
+                result=RESULTS.successful)
+    out = lax.while_loop(cond, body, init)
+    return out["theta"], out["mu"], out["result"], out["steps"]
+
+
+@jax.custom_jvp
+def _implicit(theta, mu, scene):
+    return theta, mu
+
+
+@_implicit.defjvp
+def _implicit_jvp(primals, tangents):
+    theta, mu, scene = primals
+    _, _, dscene = tangents
+    d_fn = lambda sc: jax.grad(lagrangian, argnums=(0, 1))(theta, mu, sc)  # noqa: E731
+    _, (rt, rm) = jax.jvp(d_fn, (scene,), (dscene,))
+    K = _kkt.assemble(_grad_fn(scene), theta, mu)
+    dt, dm = lax.custom_linear_solve(
+        lambda x: _kkt.matvec(K, *x),
+        (-rt, -rm),
+        lambda _, b: _kkt.solve(K, *b),
+        symmetric=True,
+    )
+    return (theta, mu), (dt, dm)
+
+
+def _solve_impl(scene, theta0, mu0, solver):
+    scene = _float_scene(scene)
+    dtype = scene_dtype(scene)
+    theta0 = jnp.asarray(theta0, dtype)
+    mu0 = jnp.zeros(2, dtype) if mu0 is None else jnp.asarray(mu0, dtype)
+    if theta0.shape != (scene.mesh.n,):
+        raise ValueError(f"theta0 must have shape ({scene.mesh.n},), got {theta0.shape}")
+    t, m, result, steps = _newton(lax.stop_gradient(scene), lax.stop_gradient(theta0),
+                                  lax.stop_gradient(mu0), solver)
+    K = _kkt.assemble(_grad_fn(lax.stop_gradient(scene)), t, m)
+    nneg = _kkt.count_below(K, jnp.zeros(1, dtype))[0]
+    if solver.minimize:
+        result = RESULTS.where((result == RESULTS.successful) & (nneg > 0), RESULTS.converged_to_saddle, result)
+    t, m = _implicit(t, m, scene)
+    return Equilibrium(t, m, result, steps, nneg, scene)
+
+
+@eqx.filter_jit
+def solve_equilibrium(scene, theta0, mu0=None, *, solver: Newton = Newton(), throw: bool = False) -> Equilibrium:
+    r"""Solve for an equilibrium of `scene` starting from angles `theta0`.
+
+    **Arguments:**
+    - `scene`: a [`jaxrod.Scene`][].
+    - `theta0`: initial segment angles, shape (N,) (for example a previous solution, or
+      [`jaxrod.initial_state`][]).
+    - `mu0`: initial end force (default zero).
+    - `solver`: a [`jaxrod.Newton`][].
+    - `throw`: raise (via `eqx.error_if`) if the result is not `successful`. Keep it
+      `False` under `vmap` and read `eq.result` per member.
+
+    **Returns:** an [`jaxrod.Equilibrium`][]. Differentiable with respect to every float
+    leaf of `scene` (implicit function theorem).
+    """
+    eq = _solve_impl(scene, theta0, mu0, solver)
+    if throw:
+        eq = eqx.tree_at(lambda e: e.theta, eq,
+                         eq.result.error_if(eq.theta, eq.result != RESULTS.successful))
+    return eq

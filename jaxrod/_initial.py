@@ -1,0 +1,118 @@
+r"""Up and down states built on their own, by homotopy from the flat buckled strip.
+
+MODEL.md: the up and down states need not be connected by continuation in alpha, so
+each is built from the flat strip ($\Psi_0=\pi$, $\alpha=0$) buckled up or down at the
+requested gap, then deformed to the requested $(\Psi_0,\alpha_L,\alpha_R)$ (and
+gravity) in `steps` Newton-minimization steps. Three deformation paths are tried at
+once under `vmap` (all parameters together; crease first then clamps; clamps first then
+crease); a path is valid when every step converges to a stable equilibrium whose fold
+height keeps the requested sign. The first valid path wins; if none is valid the
+result is `state_not_found` (for example the down state of a tight fold at a large gap,
+which does not exist at $\alpha=0$).
+
+The flat buckled start is $\theta_i=\pm A\sin(2\pi m_i/L)$ with $A$ chosen so that
+$\sum_i h_i\cos\theta_i=G$ exactly; Newton then relaxes it onto the elastica.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from ._energy.geometry import discretize, scene_dtype
+from ._energy.lagrangian import positions
+from ._equilibrium import Newton, _float_scene, solve_equilibrium
+from ._solution import RESULTS, Equilibrium
+
+
+def buckled_guess(scene, up: bool = True):
+    """Sine-shaped first buckling mode meeting the gap exactly: shape (N,)."""
+    scene = _float_scene(scene)
+    d = discretize(scene)
+    L = scene.strip.length
+    shape = jnp.sin(2 * jnp.pi * d.mid[1:-1] / L)
+    G = scene.clamps.gap
+
+    def body(_, lh):
+        lo, hi = lh
+        A = 0.5 * (lo + hi)
+        x = jnp.sum(d.h * jnp.cos(A * shape))
+        too_long = x > G  # amplitude too small
+        return jnp.where(too_long, A, lo), jnp.where(too_long, hi, A)
+
+    lo, hi = lax.fori_loop(0, 60, body, (jnp.zeros((), d.h.dtype), jnp.full((), 2.4048, d.h.dtype)))
+    A = 0.5 * (lo + hi)
+    return (1.0 if up else -1.0) * A * shape
+
+
+def _path_params(kind, u):
+    """Progress of (crease, clamps) along path `kind` at homotopy time u in [0, 1]."""
+    both = u
+    crease_first = (jnp.clip(2 * u, 0, 1), jnp.clip(2 * u - 1, 0, 1))
+    clamps_first = (jnp.clip(2 * u - 1, 0, 1), jnp.clip(2 * u, 0, 1))
+    uc = jnp.select([kind == 0, kind == 1], [both, crease_first[0]], clamps_first[0])
+    ua = jnp.select([kind == 0, kind == 1], [both, crease_first[1]], clamps_first[1])
+    return uc, ua
+
+
+def _deformed(scene, uc, ua):
+    st, cl = scene.strip, scene.clamps
+    psi0 = jnp.pi + uc * (st.psi0 - jnp.pi)
+    scene = eqx.tree_at(lambda s: s.strip.psi0, scene, psi0)
+    scene = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene,
+                        (ua * cl.alpha_left, ua * cl.alpha_right))
+    if scene.gravity is not None:
+        scene = eqx.tree_at(lambda s: s.gravity.g, scene, uc * scene.gravity.g)
+    return scene
+
+
+def _fold_height(theta, mu, scene):
+    return positions(theta, mu, scene)[scene.mesh.n // 2, 1]
+
+
+@eqx.filter_jit
+def initial_state(scene, state: str = "up", *, steps: int = 24, solver: Newton = Newton()) -> Equilibrium:
+    r"""The stable up (`state="up"`, $y(L/2)>0$) or down (`"down"`) equilibrium of
+    `scene`, built from the flat buckled strip by homotopy (see the module docstring).
+
+    **Returns:** an [`jaxrod.Equilibrium`][] whose `result` is `successful`, or
+    `state_not_found` when no deformation path reaches a stable state of that sign.
+    """
+    if state not in ("up", "down"):
+        raise ValueError(f"state must be 'up' or 'down', got {state!r}")
+    if not solver.minimize:
+        raise ValueError("initial_state needs a minimizing Newton solver (minimize=True)")
+    up = state == "up"
+    scene = _float_scene(scene)
+    dtype = scene_dtype(scene)
+    sgn = 1.0 if up else -1.0
+    target = lax.stop_gradient(scene)
+
+    def run_path(kind):
+        s0 = _deformed(target, jnp.zeros((), dtype), jnp.zeros((), dtype))
+        eq0 = solve_equilibrium(s0, buckled_guess(s0, up), solver=solver)
+        ok0 = eq0.converged & eq0.stable & (sgn * _fold_height(eq0.theta, eq0.force, s0) > 0)
+
+        def step(carry, u):
+            t, m, ok = carry
+            uc, ua = _path_params(kind, u)
+            sc = _deformed(target, uc, ua)
+            eq = solve_equilibrium(sc, t, m, solver=solver)
+            good = eq.converged & eq.stable & (sgn * _fold_height(eq.theta, eq.force, sc) > 0)
+            return (eq.theta, eq.force, ok & good), None
+
+        us = jnp.arange(1, steps + 1, dtype=dtype) / steps
+        (t, m, ok), _ = lax.scan(step, (eq0.theta, eq0.force, ok0), us)
+        return t, m, ok
+
+    ts, ms, oks = jax.vmap(run_path)(jnp.arange(3))
+    best = jnp.argmax(oks)
+    found = jnp.any(oks)
+    # final polish on the target scene (also attaches implicit derivatives)
+    eq = solve_equilibrium(scene, ts[best], ms[best], solver=solver)
+    good = eq.converged & eq.stable & (sgn * _fold_height(eq.theta, eq.force, eq.scene) > 0)
+    result = RESULTS.where(found & good, eq.result,
+                           RESULTS.where(eq.converged | ~found, RESULTS.state_not_found, eq.result))
+    return eqx.tree_at(lambda e: e.result, eq, result)
