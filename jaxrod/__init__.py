@@ -2,6 +2,14 @@
 
 import importlib.metadata
 
+from ._continuation import AbstractParameter as AbstractParameter
+from ._continuation import Branch as Branch
+from ._continuation import continue_branch as continue_branch
+from ._continuation import Continuation as Continuation
+from ._continuation import Gap as Gap
+from ._continuation import LeftAlpha as LeftAlpha
+from ._continuation import RightAlpha as RightAlpha
+from ._continuation import SymmetricAlpha as SymmetricAlpha
 from ._energy.geometry import discretize as discretize
 from ._energy.lagrangian import lagrangian as lagrangian
 from ._equilibrium import Newton as Newton
@@ -18,6 +26,8 @@ from ._observables import fold_height as fold_height
 from ._observables import node_positions as node_positions
 from ._observables import strains as strains
 from ._observables import tangent_angles as tangent_angles
+from ._plot import plot_equilibria as plot_equilibria
+from ._plot import plot_shape as plot_shape
 from ._rod import Clamps as Clamps
 from ._rod import Gravity as Gravity
 from ._rod import make_scene as make_scene
@@ -25,6 +35,10 @@ from ._rod import Mesh as Mesh
 from ._rod import Scene as Scene
 from ._rod import Stretching as Stretching
 from ._rod import Strip as Strip
+from ._snap import KIND_NAMES as KIND_NAMES
+from ._snap import snap_angles as snap_angles
+from ._snap import SnapAngles as SnapAngles
+from ._snap import SnapPath as SnapPath
 from ._solution import Equilibrium as Equilibrium
 from ._solution import RESULTS as RESULTS
 from ._stability import dense_reduced_hessian as dense_reduced_hessian

@@ -69,6 +69,7 @@ def _residual(g, scene):
     return jnp.maximum(rt, rm)
 
 
+MAX_ANGLE_STEP = 0.5  # rad
 _DELTAS = 10.0 ** jnp.arange(-8, 5)  # inertia-correction ladder, relative to max|diag T|
 
 
@@ -94,48 +95,69 @@ def _newton(scene, theta0, mu0, solver: Newton):
         t, m = c["theta"], c["mu"]
         g = grad_fn(t, m)
         res = _residual(g, scene)
-        K = _kkt.assemble(grad_fn, t, m)
-        if solver.minimize:
-            scale = jnp.max(jnp.abs(K.diag))
-            deltas = jnp.concatenate([jnp.zeros(1, dtype), scale * _DELTAS.astype(dtype)])
-            ok = _kkt.count_below(K, -deltas) == 0
-            delta = jnp.where(jnp.any(ok), deltas[jnp.argmax(ok)], deltas[-1])
-        else:
-            delta = jnp.zeros((), dtype)
-        p, q = _kkt.solve(K, -g[0], -g[1], shift=-delta)
-        if solver.minimize:
-            m_new = m + q
-            f0 = merit(t, m_new)
-            slope = jax.jvp(lambda tt: merit(tt, m_new), (t,), (p,))[1]
-            slope = jnp.minimum(slope, 0.0)
+        def work():
+            K = _kkt.structured(t, m, scene, d)
+            if solver.minimize:
+                # eigenvalues must exceed a small positive floor: a nearly singular
+                # Hessian (a critical state) would otherwise give a huge, useless step
+                scale = jnp.max(jnp.abs(K.diag))
+                floor = 1e-8 * scale
 
-            def accept(step):
-                tt = t + step * p
-                f = merit(tt, m_new)
-                armijo = f <= f0 + 1e-4 * step * slope
-                return jnp.isfinite(f) & armijo
+                def ladder():
+                    deltas = scale * _DELTAS.astype(dtype)
+                    ok = _kkt.count_below(K, floor - deltas) == 0
+                    return jnp.where(jnp.any(ok), deltas[jnp.argmax(ok)], deltas[-1])
 
-            full_res = _residual(grad_fn(t + p, m + q), scene)
-            full_ok = (full_res <= 0.5 * res) & jnp.isfinite(full_res)
+                # the ladder of shifts is only needed away from a local minimum
+                is_min = _kkt.count_below(K, jnp.full((1,), floor, dtype))[0] == 0
+                delta = lax.cond(is_min, lambda: jnp.zeros((), dtype), ladder)
+            else:
+                delta = jnp.zeros((), dtype)
+            p, q = _kkt.solve(K, -g[0], -g[1], shift=-delta)
+            # cap the angle update at MAX_ANGLE_STEP rad (inactive near convergence)
+            cap = jnp.minimum(1.0, MAX_ANGLE_STEP / jnp.maximum(jnp.max(jnp.abs(p)), 1e-300))
+            cap = jnp.where(jnp.isfinite(cap), cap, 1.0)
+            p, q = cap * p, cap * q
+            if solver.minimize:
+                f0 = merit(t, m)
+                slope = jax.jvp(merit, (t, m), (p, q))[1]
+                slope = jnp.minimum(slope, 0.0)
 
-            def ls_cond(s):
-                step, k = s
-                return (~accept(step)) & (k < solver.max_backtracks)
+                def accept(step):
+                    f = merit(t + step * p, m + step * q)
+                    armijo = f <= f0 + 1e-4 * step * slope
+                    return jnp.isfinite(f) & armijo
 
-            def ls_body(s):
-                step, k = s
-                return 0.5 * step, k + 1
+                full_res = _residual(grad_fn(t + p, m + q), scene)
+                full_ok = (full_res <= 0.5 * res) & jnp.isfinite(full_res)
 
-            step, k = lax.cond(
-                full_ok,
-                lambda: (jnp.ones((), dtype), jnp.zeros((), jnp.int32)),
-                lambda: lax.while_loop(ls_cond, ls_body, (jnp.ones((), dtype), jnp.zeros((), jnp.int32))),
-            )
-            ls_failed = (k >= solver.max_backtracks) & ~full_ok
-            t_new, m_upd = t + step * p, m + step * q
-        else:
-            ls_failed = jnp.zeros((), bool)
-            t_new, m_upd = t + p, m + q
+                # The Armijo test is carried as a flag, never re-evaluated in `ls_cond`: under
+                # `vmap` the loop condition is recomputed inside the body, and a differently
+                # fused copy of `merit` can round the other way when f == f0 (a converged
+                # iterate), so the loop would run forever without updating that member.
+                def ls_cond(s):
+                    step, k, ok = s
+                    return (~ok) & (k < solver.max_backtracks)
+
+                def ls_body(s):
+                    step, k, _ = s
+                    return 0.5 * step, k + 1, accept(0.5 * step)
+
+                one = jnp.ones((), dtype)
+                step, k, _ = lax.cond(
+                    full_ok,
+                    lambda: (one, jnp.zeros((), jnp.int32), jnp.ones((), bool)),
+                    lambda: lax.while_loop(ls_cond, ls_body, (one, jnp.zeros((), jnp.int32), accept(one))),
+                )
+                ls_failed = (k >= solver.max_backtracks) & ~full_ok
+                t_new, m_upd = t + step * p, m + step * q
+            else:
+                ls_failed = jnp.zeros((), bool)
+                t_new, m_upd = t + p, m + q
+            return t_new, m_upd, ls_failed
+
+        # a converged iterate skips the (discarded) Hessian assembly and step
+        t_new, m_upd, ls_failed = lax.cond(res <= gtol, lambda: (t, m, jnp.zeros((), bool)), work)
         converged = res <= gtol
         finite = jnp.all(jnp.isfinite(t_new)) & jnp.all(jnp.isfinite(m_upd)) & jnp.isfinite(res)
         steps = c["steps"] + 1
@@ -179,13 +201,21 @@ def _implicit_jvp(primals, tangents):
     _, _, dscene = tangents
     d_fn = lambda sc: jax.grad(lagrangian, argnums=(0, 1))(theta, mu, sc)  # noqa: E731
     _, (rt, rm) = jax.jvp(d_fn, (scene,), (dscene,))
-    K = _kkt.assemble(_grad_fn(scene), theta, mu)
-    dt, dm = lax.custom_linear_solve(
-        lambda x: _kkt.matvec(K, *x),
-        (-rt, -rm),
-        lambda _, b: _kkt.solve(K, *b),
-        symmetric=True,
-    )
+    K = _kkt.structured(theta, mu, scene)
+    N = theta.shape[0]
+    # one flat right-hand side: it is then linear in the tangents as a whole, even when
+    # the parameter moves only the theta or only the mu residual (the transpose of
+    # custom_linear_solve needs that)
+    b = -jnp.concatenate([rt, rm])
+
+    def mv(x):
+        return jnp.concatenate(_kkt.matvec(K, x[:N], x[N:]))
+
+    def sol(_, r):
+        return jnp.concatenate(_kkt.solve(K, r[:N], r[N:]))
+
+    dx = lax.custom_linear_solve(mv, b, sol, symmetric=True)
+    dt, dm = dx[:N], dx[N:]
     return (theta, mu), (dt, dm)
 
 
@@ -198,7 +228,7 @@ def _solve_impl(scene, theta0, mu0, solver):
         raise ValueError(f"theta0 must have shape ({scene.mesh.n},), got {theta0.shape}")
     t, m, result, steps = _newton(lax.stop_gradient(scene), lax.stop_gradient(theta0),
                                   lax.stop_gradient(mu0), solver)
-    K = _kkt.assemble(_grad_fn(lax.stop_gradient(scene)), t, m)
+    K = _kkt.structured(t, m, lax.stop_gradient(scene))
     nneg = _kkt.count_below(K, jnp.zeros(1, dtype))[0]
     if solver.minimize:
         result = RESULTS.where((result == RESULTS.successful) & (nneg > 0), RESULTS.converged_to_saddle, result)

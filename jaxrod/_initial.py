@@ -6,7 +6,8 @@ requested gap, then deformed to the requested $(\Psi_0,\alpha_L,\alpha_R)$ (and
 gravity) in `steps` Newton-minimization steps. Three deformation paths are tried at
 once under `vmap` (all parameters together; crease first then clamps; clamps first then
 crease); a path is valid when every step converges to a stable equilibrium whose fold
-height keeps the requested sign. The first valid path wins; if none is valid the
+height keeps the requested sign and whose angles change by less than pi/2 from the
+previous step (no jump to another branch). The first valid path wins; if none is valid the
 result is `state_not_found` (for example the down state of a tight fold at a large gap,
 which does not exist at $\alpha=0$).
 
@@ -45,6 +46,11 @@ def buckled_guess(scene, up: bool = True):
     lo, hi = lax.fori_loop(0, 60, body, (jnp.zeros((), d.h.dtype), jnp.full((), 2.4048, d.h.dtype)))
     A = 0.5 * (lo + hi)
     return (1.0 if up else -1.0) * A * shape
+
+
+_MAX_STEP_CHANGE = 0.5 * jnp.pi
+"""Largest change of any angle in one homotopy step along a tracked branch (rad). Valid
+paths change by < 0.5 rad per step (24 steps); lost branches jump by several rad."""
 
 
 def _path_params(kind, u):
@@ -101,6 +107,9 @@ def initial_state(scene, state: str = "up", *, steps: int = 24, solver: Newton =
             sc = _deformed(target, uc, ua)
             eq = solve_equilibrium(sc, t, m, solver=solver)
             good = eq.converged & eq.stable & (sgn * _fold_height(eq.theta, eq.force, sc) > 0)
+            # a jump in some angle means the branch was lost (a snap), even when Newton then
+            # lands on a stable state of the right sign (e.g. one wound into loops)
+            good = good & (jnp.max(jnp.abs(eq.theta - t)) < _MAX_STEP_CHANGE)
             return (eq.theta, eq.force, ok & good), None
 
         us = jnp.arange(1, steps + 1, dtype=dtype) / steps

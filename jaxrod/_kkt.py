@@ -75,6 +75,20 @@ def assemble(grad_fn, theta, mu) -> BorderedTridiagonal:
     return BorderedTridiagonal(lower, diag, upper, border, corner)
 
 
+def _solve2(S, r):
+    """Closed-form solve of 2x2 systems (Cramer's rule): one fused op instead of LAPACK."""
+    det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+    return jnp.stack([S[1, 1] * r[0] - S[0, 1] * r[1], S[0, 0] * r[1] - S[1, 0] * r[0]]) / det
+
+
+def structured(theta, mu, scene, d=None) -> BorderedTridiagonal:
+    """The Hessian of the condensed Lagrangian, assembled per stencil (see
+    `_energy.lagrangian.hessian_blocks`); equal to `assemble` of its gradient."""
+    from ._energy.lagrangian import hessian_blocks
+
+    return BorderedTridiagonal(*hessian_blocks(theta, mu, scene, d))
+
+
 def matvec(K: BorderedTridiagonal, vt, vm):
     Tv = K.diag * vt + K.upper * jnp.roll(vt, -1) + K.lower * jnp.roll(vt, 1)
     return Tv + K.border @ vm, K.border.T @ vt + K.corner @ vm
@@ -88,7 +102,7 @@ def solve(K: BorderedTridiagonal, rt, rm, shift=0.0):
     r"""Solve $(\mathsf K-\sigma\,\mathrm{diag}(I,0))\,(a,b) = (r_\theta, r_\mu)$ in $O(N)$."""
     X = _tri(K, shift, jnp.concatenate([rt[:, None], K.border], axis=1))
     S = K.corner - K.border.T @ X[:, 1:]
-    b = jnp.linalg.solve(S, rm - K.border.T @ X[:, 0])
+    b = _solve2(S, rm - K.border.T @ X[:, 0])
     a = X[:, 0] - X[:, 1:] @ b
     return a, b
 

@@ -50,3 +50,4 @@ def as_float(x, dtype=None):
 
 
 deg = math.pi / 180.0
+

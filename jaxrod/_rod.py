@@ -22,6 +22,17 @@ import numpy as np
 from ._misc import check_param
 
 
+def _leaf(x):
+    """A Python scalar as a 0-d JAX array (weakly typed, so dtype promotion is unchanged).
+
+    `eqx.filter_jit` treats Python scalars as static: kept as floats, every new parameter
+    value would recompile `solve_equilibrium`, `initial_state`, ... Arrays, NumPy scalars
+    and tracers are left as they are."""
+    if isinstance(x, (int, float)) and not isinstance(x, (bool, np.generic)):
+        return jnp.asarray(float(x))
+    return x
+
+
 class Strip(eqx.Module):
     r"""A strip of length $L$, bending stiffness $B$, mass per length $\lambda$, with
     one crease of fold angle $\Psi_0$ (radians, interior angle; $\pi$ = flat) and fold
@@ -44,11 +55,11 @@ class Strip(eqx.Module):
         if s0 is None:
             s0 = 0.02 * length
         check_param("s0", s0, lo=0.0)
-        self.psi0 = psi0
-        self.s0 = s0
-        self.length = length
-        self.bending_stiffness = bending_stiffness
-        self.line_density = line_density
+        self.psi0 = _leaf(psi0)
+        self.s0 = _leaf(s0)
+        self.length = _leaf(length)
+        self.bending_stiffness = _leaf(bending_stiffness)
+        self.line_density = _leaf(line_density)
 
     @classmethod
     def from_physical(cls, *, youngs_modulus, density, thickness, width, length, psi0=math.pi, s0=None):
@@ -92,9 +103,9 @@ class Clamps(eqx.Module):
         check_param("gap", gap, lo=0.0)
         check_param("alpha_left", alpha_left)
         check_param("alpha_right", alpha_right)
-        self.gap = gap
-        self.alpha_left = alpha_left
-        self.alpha_right = alpha_right
+        self.gap = _leaf(gap)
+        self.alpha_left = _leaf(alpha_left)
+        self.alpha_right = _leaf(alpha_right)
 
     @classmethod
     def symmetric(cls, gap, alpha=0.0):
@@ -169,7 +180,7 @@ class Stretching(eqx.Module):
 
     def __init__(self, stiffness=1.0e6):
         check_param("stiffness", stiffness, lo=0.0)
-        self.stiffness = stiffness
+        self.stiffness = _leaf(stiffness)
 
 
 class Gravity(eqx.Module):
@@ -180,7 +191,7 @@ class Gravity(eqx.Module):
 
     def __init__(self, g=9.81):
         check_param("g", g)
-        self.g = g
+        self.g = _leaf(g)
 
 
 class Scene(eqx.Module):

@@ -16,8 +16,6 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from . import _kkt
-from ._energy.geometry import discretize
-from ._energy.lagrangian import lagrangian
 
 
 class Stability(eqx.Module):
@@ -38,9 +36,7 @@ class Stability(eqx.Module):
 def hessian(eq) -> _kkt.BorderedTridiagonal:
     """The bordered tridiagonal Hessian of the condensed Lagrangian at `eq`."""
     scene = jax.lax.stop_gradient(eq.scene)
-    d = discretize(scene)
-    g = lambda t, m: jax.grad(lagrangian, argnums=(0, 1))(t, m, scene, d)  # noqa: E731
-    return _kkt.assemble(g, jax.lax.stop_gradient(eq.theta), jax.lax.stop_gradient(eq.force))
+    return _kkt.structured(jax.lax.stop_gradient(eq.theta), jax.lax.stop_gradient(eq.force), scene)
 
 
 def mode_parity(modes):

@@ -21,6 +21,7 @@ strip is $K=\infty$ (the last sum dropped).
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from .bending import bending_energy
@@ -51,15 +52,50 @@ def strains(theta, mu, scene, d):
     return -axial_load(theta, mu, scene, d) / scene.stretching.stiffness
 
 
+def _segment_terms(theta_i, mu, h_i, W_i, inv_K):
+    r"""Per-segment part $h_i a_i - h_i a_i^2/(2K)$ of $\tilde{\mathcal L}$."""
+    a = -(mu[0] * jnp.cos(theta_i) + mu[1] * jnp.sin(theta_i)) + W_i * jnp.sin(theta_i)
+    return h_i * a - 0.5 * inv_K * h_i * a**2
+
+
+def _segment_data(scene, d):
+    W = gravity_weights(scene, d)
+    W = jnp.zeros_like(d.h) if W is None else W
+    inv_K = 0.0 if scene.stretching is None else 1.0 / scene.stretching.stiffness
+    return W, jnp.asarray(inv_K, d.h.dtype)
+
+
 def lagrangian(theta, mu, scene, d=None):
     r"""$\tilde{\mathcal L}(\theta,\mu)$, see the module docstring."""
     if d is None:
         d = discretize(scene)
-    a = axial_load(theta, mu, scene, d)
-    out = bending_energy(theta, scene, d) + jnp.sum(d.h * a) + mu[0] * scene.clamps.gap
-    if scene.stretching is not None:
-        out = out - jnp.sum(d.h * a**2) / (2.0 * scene.stretching.stiffness)
-    return out
+    W, inv_K = _segment_data(scene, d)
+    seg = jax.vmap(_segment_terms, in_axes=(0, None, 0, 0, None))(theta, mu, d.h, W, inv_K)
+    return bending_energy(theta, scene, d) + jnp.sum(seg) + mu[0] * scene.clamps.gap
+
+
+def hessian_blocks(theta, mu, scene, d=None):
+    r"""The Hessian of $\tilde{\mathcal L}$ as (lower, diag, upper, border, corner),
+    assembled per stencil: the bending part is the constant tridiagonal matrix
+    $B\,D^\top \mathrm{diag}(1/\ell) D$, the segment terms contribute $3\times3$
+    autodiff Hessians in $(\theta_i,\mu)$ (vmapped over segments)."""
+    if d is None:
+        d = discretize(scene)
+    B = scene.strip.bending_stiffness
+    kb = B / d.ell  # (N+1,) hinge stiffnesses
+    W, inv_K = _segment_data(scene, d)
+
+    def seg(x, h_i, W_i):
+        return _segment_terms(x[0], x[1:], h_i, W_i, inv_K)
+
+    x = jnp.concatenate([theta[:, None], jnp.broadcast_to(mu, (theta.shape[0], 2))], axis=1)
+    H = jax.vmap(jax.hessian(seg))(x, d.h, W)  # (N, 3, 3)
+    diag = kb[:-1] + kb[1:] + H[:, 0, 0]
+    off = -kb[1:-1]
+    zero = jnp.zeros((1,), theta.dtype)
+    upper = jnp.concatenate([off, zero])
+    lower = jnp.concatenate([zero, off])
+    return lower, diag, upper, H[:, 0, 1:], jnp.sum(H[:, 1:, 1:], axis=0)
 
 
 def positions(theta, mu, scene, d=None):

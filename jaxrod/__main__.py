@@ -1,0 +1,8 @@
+"""`python -m jaxrod` runs the command-line interface (see `jaxrod --help`)."""
+
+import sys
+
+from ._cli import main
+
+
+sys.exit(main())

@@ -1,0 +1,241 @@
+r"""Snap angles: where the quasi-statically actuated strip loses stability, and of what kind.
+
+Snap up: start in the down state at $\alpha=0$, increase $\alpha$ along the branch
+(pseudo-arclength continuation) until the unstable count $\nu$ of the constrained Hessian
+changes. Snap down: start in the up state, decrease $\alpha$. When the down state does
+not exist at $\alpha=0$ (tight folds at large gaps), the snap-up path starts from the
+state the snap-down path reached at its most negative angle, i.e. the other half of the
+quasi-static hysteresis protocol.
+
+The critical point between the last stable and the first unstable point is refined by
+bisection on the arclength along the stable point's tangent (each trial is a corrector
+solve plus one Sturm count), to $\Delta s\sim 2^{-48}$ of the step, so $\alpha_c$ is exact to
+round-off at the given mesh. Its kind: under symmetric actuation, a *branch point* if
+the mode that goes unstable is mirror-asymmetric, a *fold* (limit point in $\alpha$) if it
+is symmetric; under one-sided actuation, a fold.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax import lax
+from jaxtyping import Array
+
+from . import _kkt
+from ._continuation import (
+    AbstractParameter,
+    Continuation,
+    SymmetricAlpha,
+    _pieces,
+    _tangent,
+    continue_branch,
+    corrector,
+)
+from ._energy.geometry import discretize
+from ._energy.lagrangian import positions
+from ._equilibrium import Newton, _float_scene, solve_equilibrium
+from ._initial import initial_state
+from ._solution import RESULTS, Equilibrium
+from ._stability import mode_parity
+
+
+KIND_NONE, KIND_FOLD, KIND_BRANCH_POINT = 0, 1, 2
+KIND_NAMES = {KIND_NONE: "none", KIND_FOLD: "fold", KIND_BRANCH_POINT: "branch_point"}
+
+
+class SnapPath(eqx.Module):
+    """One direction of the hysteresis loop.
+
+    `snaps` (bool), `alpha_c` (rad; NaN if it does not snap), `kind` (0 none, 1 fold,
+    2 branch point), `theta_before`/`force_before` the critical state,
+    `fold_height_before`, `theta_after`/`fold_height_after` the state it lands in,
+    `branch` the continuation stages (leading axis: stage; a supercritical branch point
+    is followed by a second stage on the asymmetric branch), `result` (a RESULTS code for the start
+    state)."""
+
+    snaps: Array
+    alpha_c: Array
+    kind: Array
+    theta_before: Array
+    force_before: Array
+    fold_height_before: Array
+    theta_after: Array
+    force_after: Array
+    fold_height_after: Array
+    branch: object
+    result: RESULTS
+
+
+def _fh(scene, parameter, t, m, lam):
+    sc = parameter.set(scene, lam)
+    return positions(t, m, sc)[sc.mesh.n // 2, 1]
+
+
+def _refine(scene, parameter, branch, settings, tol, bisections):
+    """Bisection on arclength between the last stable and the first unstable point."""
+    F, F_lam, Kf = _pieces(scene, parameter)
+    w = discretize(scene).h
+    i = branch.count - 1
+    ta, ma, la = branch.theta[i - 1], branch.force[i - 1], branch.lam[i - 1]
+    tb, lb = branch.theta[i], branch.lam[i]
+    nu_a = branch.num_unstable[i - 1]
+    Ka = Kf(ta, ma, la)
+    # tangent at a, oriented along the secant a -> b
+    zt, zm = _kkt.solve(Ka, -F_lam(ta, ma, la)[0], -F_lam(ta, ma, la)[1])
+    nrm = jnp.sqrt(jnp.sum(w * zt**2) + 1.0)
+    tau = (zt / nrm, zm / nrm, 1.0 / nrm)
+    sgn = jnp.sign(jnp.sum(w * tau[0] * (tb - ta)) + tau[2] * (lb - la))
+    sgn = jnp.where(sgn == 0, 1.0, sgn)
+    tau = jax.tree.map(lambda v: sgn * v, tau)
+    ds_b = branch.ds[i]
+
+    def body(_, c):
+        lo, hi, best = c
+        s = 0.5 * (lo + hi)
+        t, m, lam, conv, _ = corrector(scene, parameter, (ta, ma), la, tau, s, settings.corrector_steps, tol)
+        nu = _kkt.count_below(Kf(t, m, lam), jnp.zeros(1, t.dtype))[0]
+        stable_side = conv & (nu == nu_a)
+        lo = jnp.where(stable_side, s, lo)
+        hi = jnp.where(stable_side, hi, s)
+        best = jax.tree.map(lambda new, old: jnp.where(stable_side, new, old), (t, m, lam), best)
+        return lo, hi, best
+
+    lo, hi, (t, m, lam) = lax.fori_loop(0, bisections, body, (jnp.zeros_like(ds_b), ds_b, (ta, ma, la)))
+    # state just past the critical point: its lowest mode tells the kind
+    t2, m2, l2, _, _ = corrector(scene, parameter, (ta, ma), la, tau, hi, settings.corrector_steps, tol)
+    K2 = Kf(t2, m2, l2)
+    lam_min = _kkt.smallest_eigenvalues(K2, 1)
+    v = _kkt.modes(K2, lam_min)[:, 0]
+    tl_c = _tangent(Kf(t, m, lam), F_lam(t, m, lam), w * tau[0], tau[2], w)[2]
+    return t, m, lam, v, tl_c
+
+
+def _land(scene, parameter, t, m, lam, v, direction, up_expected, solver):
+    """Push the critical state along the unstable mode slightly past alpha_c and relax."""
+    sc = parameter.set(scene, lam + direction * 1e-3)
+    eps = 0.05
+    plus = _fh(scene, parameter, t + eps * v, m, lam)
+    minus = _fh(scene, parameter, t - eps * v, m, lam)
+    pick = jnp.where((plus > minus) == up_expected, 1.0, -1.0)
+    eq = solve_equilibrium(sc, t + pick * eps * v, m, solver=Newton(max_steps=200))
+    return eq.theta, eq.force, _fh(scene, parameter, eq.theta, eq.force, lam + direction * 1e-3), eq
+
+
+JUMP_DISTANCE = 0.1  # rad, L2 distance of the angle field; see `_path`
+
+
+def _is_mirror_symmetric(theta, tol=1e-6):
+    return jnp.max(jnp.abs(theta + theta[::-1])) < tol
+
+
+def _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bisections, tol):
+    """Continue from (t0, m0) at parameter lam0 until stability changes; refine; land."""
+    sc = parameter.set(scene, lam0)
+    start = Equilibrium(t0, m0, RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), sc)
+    branch = continue_branch(sc, start, parameter, direction=direction,
+                             bounds=(-bound, bound), settings=settings, stop_on_instability=True)
+    snaps = (branch.stop == 2) & ok0
+    t, m, lam, v, _ = _refine(scene, parameter, branch, settings, tol, bisections)
+    if isinstance(parameter, SymmetricAlpha):
+        asym = (mode_parity(v[:, None])[0] < 0) & _is_mirror_symmetric(t)
+        kind = jnp.where(asym, KIND_BRANCH_POINT, KIND_FOLD)
+    else:
+        kind = jnp.full((), KIND_FOLD)
+    kind = jnp.where(snaps, kind, KIND_NONE).astype(jnp.int32)
+    ta, ma, fa, eq_after = _land(scene, parameter, t, m, lam, v, direction, direction > 0, Newton())
+    fb = _fh(scene, parameter, t, m, lam)
+    return branch, snaps, kind, t, m, lam, fb, ta, ma, fa, eq_after.converged
+
+
+def _path(scene, start_eq, direction, parameter, settings, bound, bisections, tol, stages=2):
+    """One direction of the loop. After a loss of stability the critical state is pushed
+    along the unstable mode 1e-3 rad past alpha_c and relaxed. If it lands more than
+    `JUMP_DISTANCE` away (L2 norm of the angle field) the strip snaps there (to the other
+    state, or to a distant asymmetric one). If it lands close by, the instability was
+    supercritical (a stable asymmetric branch grows continuously out of a branch point,
+    amplitude ~ sqrt(1e-3) ~ 0.03): no snap yet, and the path continues from that
+    state, up to `stages` times."""
+    def body(c, _):
+        t0, m0, lam0, ok, done, out = c
+        br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = _stage(
+            scene, parameter, t0, m0, lam0, ok & ~done, direction, settings, bound, bisections, tol)
+        w = discretize(scene).h
+        dist = jnp.sqrt(jnp.sum(w * (ta - t) ** 2))
+        jumped = snaps & (dist > JUMP_DISTANCE) & landed
+        final = ~done & (~snaps | jumped)
+        new_out = (snaps, kind, t, m, lam, fb, ta, ma, fa)
+        out = jax.tree.map(lambda n, o: jnp.where(final, n, o), new_out, out)
+        lam_next = lam + direction * 1e-3
+        nxt = (ta, ma, lam_next, ok & snaps & landed, done | final, out)
+        return nxt, br
+
+    dtype = start_eq.theta.dtype
+    nan = jnp.full((), jnp.nan, dtype)
+    out0 = (jnp.zeros((), bool), jnp.zeros((), jnp.int32), start_eq.theta, start_eq.force, nan, nan,
+            start_eq.theta, start_eq.force, nan)
+    lam0 = parameter.get(start_eq.scene)
+    ok0 = start_eq.result == RESULTS.successful
+    init = (start_eq.theta, start_eq.force, jnp.asarray(lam0, dtype), ok0, jnp.zeros((), bool), out0)
+    (_, _, _, _, done, out), branches = lax.scan(body, init, None, length=stages)
+    snaps, kind, t, m, lam, fb, ta, ma, fa = out
+    snaps = snaps & done
+    return SnapPath(
+        snaps=snaps,
+        alpha_c=jnp.where(snaps, lam, nan),
+        kind=jnp.where(snaps, kind, KIND_NONE),
+        theta_before=t,
+        force_before=m,
+        fold_height_before=jnp.where(snaps, fb, nan),
+        theta_after=ta,
+        force_after=ma,
+        fold_height_after=jnp.where(snaps, fa, nan),
+        branch=branches,
+        result=start_eq.result,
+    )
+
+
+class SnapAngles(eqx.Module):
+    """Both paths of the quasi-static hysteresis loop: `up` and `down` are
+    [`jaxrod.SnapPath`][]s."""
+
+    up: SnapPath
+    down: SnapPath
+
+
+@eqx.filter_jit
+def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float = jnp.pi,
+                bisections: int = 48) -> SnapAngles:
+    r"""Critical clamp angles $\alpha_{c,\rm up}>0$ and $\alpha_{c,\rm down}<0$ of a scene
+    under symmetric clamp rotation, their kinds, the states just before and after.
+
+    The clamp angles of `scene` are ignored (the loop starts at $\alpha=0$). A path that
+    reaches $|\alpha|=$`bound` without losing stability does not snap (`snaps=False`,
+    `alpha_c=NaN`, kind "none").
+    """
+    parameter = SymmetricAlpha()
+    scene = lax.stop_gradient(parameter.set(_float_scene(scene), 0.0))
+    dtype = jnp.result_type(scene.strip.psi0)
+    tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
+    up_eq = initial_state(scene, "up")
+    down_eq = initial_state(scene, "down")
+    down = _path(scene, up_eq, -1.0, parameter, settings, bound, bisections, tol)
+    # start of the snap-up path: the down state at alpha = 0 if it exists, else the
+    # state the snap-down half of the loop reached at its most negative angle.
+    has_down = down_eq.result == RESULTS.successful
+    br = jax.tree.map(lambda x: x[0], down.branch)  # first stage
+    last = br.count - 1
+    alt_lam = br.lam[last]
+    alt_scene = parameter.set(scene, alt_lam)
+    alt_eq = solve_equilibrium(alt_scene, br.theta[last], br.force[last])
+    # (only meaningful when the down path did not snap; otherwise the landing state)
+    land_scene = parameter.set(scene, down.alpha_c - 1e-3)
+    land_eq = solve_equilibrium(land_scene, down.theta_after, down.force_after)
+    start_eq = jax.tree.map(
+        lambda a, b, c: jnp.where(has_down, a, jnp.where(down.snaps, c, b)),
+        eqx.filter(down_eq, eqx.is_array), eqx.filter(alt_eq, eqx.is_array), eqx.filter(land_eq, eqx.is_array),
+    )
+    start_eq = eqx.combine(start_eq, eqx.filter(down_eq, eqx.is_array, inverse=True))
+    up = _path(scene, start_eq, 1.0, parameter, settings, bound, bisections, tol)
+    return SnapAngles(up=up, down=down)
