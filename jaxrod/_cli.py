@@ -92,7 +92,7 @@ def _build_parser():
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"jaxrod {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="{equilibrium,demo}")
+    sub = parser.add_subparsers(dest="command", metavar="{equilibrium,snap-angles,demo}")
 
     p = sub.add_parser("equilibrium", help="solve the up or down equilibrium of one strip",
                        description="Solve the stable up or down state of a creased strip and report\n"
@@ -104,6 +104,15 @@ def _build_parser():
                    help="which state: up (fold height > 0) or down (< 0) (default %(default)s)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     p.add_argument("--plot", metavar="FILE.png", default=None, help="draw the shape with its clamps to FILE")
+
+    q = sub.add_parser("snap-angles", help="critical clamp angles of both snapping paths",
+                       description="Continue the down state (alpha increasing) and the up state (alpha\n"
+                                   "decreasing) under symmetric clamp rotation and report where each loses\n"
+                                   "stability (alpha_c), of what kind (fold or branch_point), and the fold\n"
+                                   "height just before and after. --alpha is ignored (the loop starts at 0).",
+                       epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    _add_scene_args(q)
+    q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
 
     d = sub.add_parser("demo", help="up and down states of the default strip, table + PNG + JSON (default)",
                        description="Solve the up and down equilibria of the default strip (Psi0 = 60 deg,\n"
@@ -280,6 +289,38 @@ def _cmd_equilibrium(args):
     return EXIT_OK if rec["converged"] else EXIT_NOT_CONVERGED
 
 
+def _cmd_snap_angles(args):
+    scene = _make_scene(args)
+    import numpy as np
+
+    import jaxrod as jr
+
+    r = jr.snap_angles(_array_leaves(scene))
+
+    def val(x, deg=False):
+        x = float(x)
+        if not np.isfinite(x):
+            return None
+        return float(np.degrees(x)) if deg else x
+
+    rec = {"psi0_deg": args.psi0, "gap": args.gap, "s0": args.s0, "n": args.n, "refine": args.refine}
+    for name, path in (("up", r.up), ("down", r.down)):
+        rec[f"alpha_c_{name}_deg"] = val(path.alpha_c, deg=True)
+        rec[f"kind_{name}"] = jr.KIND_NAMES[int(path.kind)]
+        rec[f"fold_height_before_{name}"] = val(path.fold_height_before)
+        rec[f"fold_height_after_{name}"] = val(path.fold_height_after)
+        rec[f"start_{name}"] = _result_name(path.result)
+    if args.json:
+        print(json.dumps(rec))
+    else:
+        for name in ("up", "down"):
+            a = rec[f"alpha_c_{name}_deg"]
+            print(f"snap {name:<4}: " + ("does not snap" if a is None else
+                  f"alpha_c = {a:+.6f} deg ({rec[f'kind_{name}']}), fold height "
+                  f"{rec[f'fold_height_before_{name}']:+.4f} -> {rec[f'fold_height_after_{name}']:+.4f}"))
+    return EXIT_OK
+
+
 def _table(recs):
     head = f"{'state':<6} {'fold height':>12} {'bending E':>11} {'compression':>12} {'min eig':>10} {'stable':>7}"
     rows = [head, "-" * len(head)]
@@ -344,6 +385,8 @@ def main(argv=None):
             _enable_x64()  # before anything is computed
             if args.command == "equilibrium":
                 return _cmd_equilibrium(args)
+            if args.command == "snap-angles":
+                return _cmd_snap_angles(args)
             return _cmd_demo(args)
         except _InputError as e:
             print(f"jaxrod: error: {e}", file=sys.stderr)

@@ -34,6 +34,17 @@ from ._energy.lagrangian import lagrangian, positions
 from ._equilibrium import _float_scene
 
 
+def require_float64(dtype, what):
+    """Continuation and critical-point refinement need float64: in float32 the Sturm
+    count near a singular Hessian and the 1e-8 rad refinement are below round-off."""
+    if dtype != jnp.float64:
+        raise ValueError(
+            f"{what} needs float64; enable it with jax.config.update('jax_enable_x64', True) "
+            "before building the scene (float32 is supported only by solve_equilibrium and "
+            "initial_state, to the tolerance documented in the README)"
+        )
+
+
 class AbstractParameter(eqx.Module):
     """The continuation parameter: how to read it from and write it into a scene."""
 
@@ -227,6 +238,7 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
     """
     scene = lax.stop_gradient(_float_scene(scene))
     dtype = eq.theta.dtype
+    require_float64(dtype, "continue_branch")
     tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
     F, F_lam, Kf = _pieces(scene, parameter)
     d = discretize(scene)

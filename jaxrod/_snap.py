@@ -31,6 +31,7 @@ from ._continuation import (
     _pieces,
     _tangent,
     continue_branch,
+    require_float64,
     corrector,
 )
 from ._energy.geometry import discretize
@@ -217,6 +218,7 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     parameter = SymmetricAlpha()
     scene = lax.stop_gradient(parameter.set(_float_scene(scene), 0.0))
     dtype = jnp.result_type(scene.strip.psi0)
+    require_float64(dtype, "snap_angles")
     tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
     up_eq = initial_state(scene, "up")
     down_eq = initial_state(scene, "down")

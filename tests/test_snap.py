@@ -68,3 +68,26 @@ def test_alpha_c_brackets_stability_loss(snap):
             else:  # fold: no equilibrium nearby past the limit point
                 far = np.max(np.abs(np.asarray(eq.theta - path.theta_before))) > 1e-2
                 assert eq.result != jr.RESULTS.successful or far
+
+
+def test_float32_refused():
+    f32 = jnp.float32
+    sc = jr.Scene(jr.Strip(psi0=f32(np.pi / 3), s0=f32(0.02)), jr.Clamps(f32(0.5)), jr.Mesh(100))
+    with pytest.raises(ValueError, match="float64"):
+        jr.snap_angles(sc)
+
+
+def test_cli_snap_angles_json(snap, capsys):
+    import json
+
+    from jaxrod._cli import main
+
+    assert main(["snap-angles", "--psi0", "60", "--gap", "0.5", "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    r = snap(60.0, 0.5)
+    assert abs(rec["alpha_c_up_deg"] - np.degrees(float(r.up.alpha_c))) < 1e-9
+    assert abs(rec["alpha_c_down_deg"] - np.degrees(float(r.down.alpha_c))) < 1e-9
+    assert rec["kind_up"] in ("fold", "branch_point") and rec["kind_down"] in ("fold", "branch_point")
+    assert main(["snap-angles", "--psi0", "30", "--gap", "0.8", "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["alpha_c_up_deg"] is None and rec["kind_up"] == "none"
