@@ -30,7 +30,11 @@ Each run compiles the solver (several seconds); set JAX_COMPILATION_CACHE_DIR to
 directory to reuse compiled code between runs."""
 
 
-class _InputError(Exception):
+# modules that register more subcommands (see `_build_parser`)
+_COMMAND_MODULES = ("._cli_critical", "._cli_statics", "._cli_dynamics", "._cli_design")
+
+
+class InputError(Exception):
     """Bad user input: reported as one line on stderr, exit code 2."""
 
 
@@ -38,7 +42,7 @@ class _Parser(argparse.ArgumentParser):
     """ArgumentParser whose errors are one line on stderr (no usage block), exit 2."""
 
     def error(self, message):
-        raise _InputError(message)
+        raise InputError(message)
 
 
 def _quiet():
@@ -59,7 +63,7 @@ def _number(text):
     return float(text)
 
 
-def _add_scene_args(p):
+def add_scene_args(p):
     g = p.add_argument_group("strip and clamps (L = 1, angles in degrees)")
     g.add_argument("--psi0", type=_number, default=DEFAULTS["psi0"], metavar="DEG",
                    help="fold angle Psi0 in (0, 180] degrees; 180 = flat strip (default %(default)g)")
@@ -99,7 +103,7 @@ def _build_parser():
                                    "fold height, energies, end compression and the smallest eigenvalues\n"
                                    "of the constrained Hessian (asymmetric modes included).",
                        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    _add_scene_args(p)
+    add_scene_args(p)
     p.add_argument("--state", choices=("up", "down"), default="down",
                    help="which state: up (fold height > 0) or down (< 0) (default %(default)s)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
@@ -111,7 +115,7 @@ def _build_parser():
                                    "stability (alpha_c), of what kind (fold or branch_point), and the fold\n"
                                    "height just before and after. --alpha is ignored (the loop starts at 0).",
                        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    _add_scene_args(q)
+    add_scene_args(q)
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
 
     d = sub.add_parser("demo", help="up and down states of the default strip, table + PNG + JSON (default)",
@@ -120,10 +124,17 @@ def _build_parser():
                                    "DIR/equilibria.png and DIR/equilibria.json.",
                        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     d.add_argument("--out", metavar="DIR", default="jaxrod-out", help="output directory (default %(default)s)")
+    # further subcommands live in their own modules; each calls `sub.add_parser(...)` and
+    # `set_defaults(handler=...)`, the handler taking the parsed args and returning an exit code
+    import importlib
+
+    for name in _COMMAND_MODULES:
+        importlib.import_module(name, __package__).register(sub)
+    sub.metavar = "{" + ",".join(sub.choices) + "}"
     return parser
 
 
-def _make_scene(args):
+def make_scene_from_args(args):
     import jaxrod as jr
 
     stretching = gravity = None
@@ -131,17 +142,17 @@ def _make_scene(args):
         try:
             stretching = jr.Stretching(args.stretching)
         except ValueError as e:
-            raise _InputError(f"stretching: {e}") from None
+            raise InputError(f"stretching: {e}") from None
     if args.gravity is not None:
         try:
             gravity = jr.Gravity(args.gravity)
         except ValueError as e:
-            raise _InputError(f"gravity: {e}") from None
+            raise InputError(f"gravity: {e}") from None
     try:
         return jr.make_scene(args.psi0, args.gap, args.alpha, alpha_right_deg=args.alpha_right, s0=args.s0,
                              n=args.n, refine=args.refine, stretching=stretching, gravity=gravity)
     except ValueError as e:
-        raise _InputError(str(e)) from None
+        raise InputError(str(e)) from None
 
 
 def _array_leaves(scene):
@@ -269,7 +280,7 @@ def _enable_x64():
 
 
 def _cmd_equilibrium(args):
-    scene = _make_scene(args)  # validates before anything is compiled
+    scene = make_scene_from_args(args)  # validates before anything is compiled
     import jaxrod as jr
 
     eq = jr.initial_state(_array_leaves(scene), args.state)
@@ -279,7 +290,7 @@ def _cmd_equilibrium(args):
         try:
             jr.plot_equilibria([eq], [args.state], args.plot)
         except OSError as e:
-            raise _InputError(f"plot: cannot write {args.plot!r}: {e.strerror or e}") from None
+            raise InputError(f"plot: cannot write {args.plot!r}: {e.strerror or e}") from None
     if args.json:
         print(json.dumps(rec))
     else:
@@ -290,7 +301,7 @@ def _cmd_equilibrium(args):
 
 
 def _cmd_snap_angles(args):
-    scene = _make_scene(args)
+    scene = make_scene_from_args(args)
     import numpy as np
 
     import jaxrod as jr
@@ -338,7 +349,7 @@ def _cmd_demo(args):
     try:
         os.makedirs(out, exist_ok=True)
     except OSError as e:
-        raise _InputError(f"out: cannot create directory {out!r}: {e.strerror or e}") from None
+        raise InputError(f"out: cannot create directory {out!r}: {e.strerror or e}") from None
     scene = _array_leaves(jr.make_scene(DEFAULTS["psi0"], DEFAULTS["gap"], DEFAULTS["alpha"], s0=DEFAULTS["s0"],
                                         n=DEFAULTS["n"]))
     states = ("up", "down")
@@ -387,8 +398,10 @@ def main(argv=None):
                 return _cmd_equilibrium(args)
             if args.command == "snap-angles":
                 return _cmd_snap_angles(args)
+            if getattr(args, "handler", None) is not None:
+                return args.handler(args)
             return _cmd_demo(args)
-        except _InputError as e:
+        except InputError as e:
             print(f"jaxrod: error: {e}", file=sys.stderr)
             return EXIT_USAGE
         except KeyboardInterrupt:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import functools
 
-import equinox as eqx
 import jax
 import jax.monitoring
 import jax.numpy as jnp
@@ -59,10 +58,6 @@ def residual(eq):
     st = eq.scene.strip
     return (float(jnp.max(jnp.abs(gt)) * st.length / st.bending_stiffness),
             float(jnp.max(jnp.abs(gm)) / st.length))
-
-
-def set_leaf(scene, where, value):
-    return eqx.tree_at(where, scene, jnp.asarray(value, jnp.float64))
 
 
 _BACKEND_COMPILE = "/jax/core/compile/backend_compile_duration"
