@@ -46,8 +46,21 @@ from ._stability import hessian as hessian
 from ._stability import Stability as Stability
 from ._stability import stability as stability
 
+from ._critical import critical_point as critical_point
+from ._critical import CriticalPoint as CriticalPoint
+from ._termination import termination_gap as termination_gap
+from ._termination import TerminationGap as TerminationGap
+
 
 try:
     __version__ = importlib.metadata.version("jaxrod")
 except importlib.metadata.PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0"
+from ._dynamics import Dissipation as Dissipation
+from ._dynamics import Protocol as Protocol
+from ._dynamics_scenes import brink as brink
+from ._dynamics_scenes import ramp as ramp
+from ._dynamics_scenes import snap_dynamics as snap_dynamics
+from ._dynamics_scenes import Start as Start
+from ._dynamics_solve import simulate as simulate
+from ._dynamics_solve import Trajectory as Trajectory

@@ -1,0 +1,209 @@
+r"""Equations of motion of the inextensible creased strip, on the statics' energy.
+
+Same discretization as the statics (`_energy/`): nodes $s_0=0<\dots<s_N=L$, segment $i$
+of fixed length $h_i$ and tangent angle $\theta_i$, node positions
+$\mathbf x_k=\sum_{i\le k}h_i\mathbf t_i$, $\mathbf t_i=(\cos\theta_i,\sin\theta_i)$,
+$\mathbf n_i=(-\sin\theta_i,\cos\theta_i)$. The potential energy is the very function
+the statics minimize, `jaxrod._energy.bending.bending_energy` (clamps as ghost segments,
+$\theta_0=\alpha_L(t)$, $\theta_{N+1}=-\alpha_R(t)$), plus gravity $g\sum_k m_k y_k$.
+Mass: the lumped node masses $m_k=\lambda\,(h_k+h_{k+1})/2$ of `discretize` (the end
+nodes are held by the clamps). Kinetic energy $E_k=\tfrac12\sum_k m_k|\dot{\mathbf x}_k|^2$.
+
+**Equations (a chain of rigid links with point masses).** Generalized forces on the
+angles, $Q_i=-\partial(E_b+R)/\partial\theta_i$ (bending, and an optional Rayleigh
+dissipation $R=\sum_k \frac{\eta}{2\ell_k}\dot\phi_k^2$ of the hinge rates, a Kelvin-Voigt
+bending viscosity $\eta$), act on the nodes as force pairs $\pm (Q_i/h_i)\mathbf n_i$ on
+nodes $i$ and $i-1$; node forces $\mathbf f_k$ add gravity $-m_k g\hat y$, viscous damping
+$-\gamma m_k\dot{\mathbf x}_k$ and quadratic air drag $-c_d\,\bar\ell_k|\dot{\mathbf x}_k|\dot{\mathbf x}_k$
+($\bar\ell_k=m_k/\lambda$). With $T_i$ the tension of link $i$,
+
+$$m_k\ddot{\mathbf x}_k=\mathbf f_k+T_{k+1}\mathbf t_{k+1}-T_k\mathbf t_k\quad(k=1..N-1),\qquad
+\mathbf t_i\cdot(\ddot{\mathbf x}_i-\ddot{\mathbf x}_{i-1})=-h_i\dot\theta_i^2,$$
+
+the second being the second time derivative of $|\mathbf x_i-\mathbf x_{i-1}|=h_i$. Node 0
+is fixed, node $N$ follows the end constraint $\mathbf x_N=(G,0)$ stabilized by
+Baumgarte, $\ddot{\mathbf x}_N=-2\Omega\dot{\mathbf x}_N-\Omega^2(\mathbf x_N-(G,0))$. Eliminating
+$\ddot{\mathbf x}$ gives a symmetric tridiagonal system for the $N$ tensions (row $i$:
+$c_{i-1}T_{i-1}/m_{i-1}-(1/m_i+1/m_{i-1})T_i+c_iT_{i+1}/m_i=\dots$, $c_i=\mathbf t_i\cdot\mathbf t_{i+1}$,
+$1/m_0=1/m_N=0$), one $O(N)$ `tridiagonal_solve`; then
+$\ddot\theta_i=\mathbf n_i\cdot(\ddot{\mathbf x}_i-\ddot{\mathbf x}_{i-1})/h_i$. This is exactly
+Lagrange's equation $M(\theta)\ddot\theta+\dots=Q-A^\top\mu$ with the dense
+$M=J^\top\mathrm{diag}(m)J$, $J_{ki}=h_i\mathbf n_i[i\le k]$, without forming $M$.
+Inextensibility is exact by construction; only the two end conditions are integrated.
+
+State: $y=(\theta,\dot\theta)$, shape (2, N). Time in units of the scene's own $T=L/v^*$ if
+$L=B=\lambda=1$ (the defaults), else in the units of the strip's fields.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from ._energy.bending import bending_energy, turning_angles
+from ._energy.geometry import discretize
+from ._misc import check_param
+
+
+class Protocol(eqx.Module):
+    r"""Clamp angles as functions of time: linear ramps that stop at `t_stop`.
+
+    $\alpha_L(t)=\alpha_{L,0}+\omega_L\,\min(\max(t,0),t_{stop})$, same for $\alpha_R$ (radians,
+    MODEL.md signs; rates in rad per time unit). `t_stop=inf` ramps for ever."""
+
+    alpha_left0: jax.Array
+    alpha_right0: jax.Array
+    rate_left: jax.Array
+    rate_right: jax.Array
+    t_stop: jax.Array
+
+    def __init__(self, alpha_left0=0.0, alpha_right0=0.0, rate_left=0.0, rate_right=0.0, t_stop=jnp.inf):
+        for name, v in [("alpha_left0", alpha_left0), ("alpha_right0", alpha_right0),
+                        ("rate_left", rate_left), ("rate_right", rate_right)]:
+            check_param(name, v)
+        self.alpha_left0 = jnp.asarray(alpha_left0, float)
+        self.alpha_right0 = jnp.asarray(alpha_right0, float)
+        self.rate_left = jnp.asarray(rate_left, float)
+        self.rate_right = jnp.asarray(rate_right, float)
+        self.t_stop = jnp.asarray(t_stop, float)
+
+    def angles(self, t):
+        """(alpha_L(t), alpha_R(t)) and their rates."""
+        tau = jnp.clip(t, 0.0, self.t_stop)
+        moving = (t > 0.0) & (t < self.t_stop)
+        aL = self.alpha_left0 + self.rate_left * tau
+        aR = self.alpha_right0 + self.rate_right * tau
+        return aL, aR, jnp.where(moving, self.rate_left, 0.0), jnp.where(moving, self.rate_right, 0.0)
+
+
+class Dissipation(eqx.Module):
+    r"""Optional dissipation (all zero: conservative).
+
+    - `damping` $\gamma$: viscous force $-\gamma\lambda\dot{\mathbf x}$ per length (units 1/T).
+    - `drag` $c_d$: quadratic air drag $-c_d|\dot{\mathbf x}|\dot{\mathbf x}$ per length
+      ($c_d=\tfrac12\rho_{air}C_Dw$; units $\lambda/L$).
+    - `viscosity` $\eta$: Kelvin-Voigt bending viscosity, Rayleigh function
+      $\sum_k\frac{\eta}{2\ell_k}\dot\phi_k^2$ (units $B\,T$); damps the fastest bending
+      modes most (a dissipation filter)."""
+
+    damping: jax.Array = 0.0
+    drag: jax.Array = 0.0
+    viscosity: jax.Array = 0.0
+
+    def __init__(self, damping=0.0, drag=0.0, viscosity=0.0):
+        for name, v in [("damping", damping), ("drag", drag), ("viscosity", viscosity)]:
+            check_param(name, v, lo=0.0, lo_open=False)
+        self.damping = jnp.asarray(damping, float)
+        self.drag = jnp.asarray(drag, float)
+        self.viscosity = jnp.asarray(viscosity, float)
+
+
+def check_scene(scene):
+    """Structural checks at trace time (ValueError naming the parameter)."""
+    if scene.stretching is not None:
+        raise ValueError("stretching: the dynamics are exactly inextensible; use stretching=None")
+
+
+def scene_at(scene, aL, aR):
+    return eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (aL, aR))
+
+
+def kinematics(theta, omega, d):
+    """Node positions and velocities, shape (N+1, 2) each."""
+    t = jnp.stack([jnp.cos(theta), jnp.sin(theta)], -1)
+    n = jnp.stack([-jnp.sin(theta), jnp.cos(theta)], -1)
+    zero = jnp.zeros((1, 2), theta.dtype)
+    x = jnp.concatenate([zero, jnp.cumsum(d.h[:, None] * t, 0)])
+    v = jnp.concatenate([zero, jnp.cumsum((d.h * omega)[:, None] * n, 0)])
+    return x, v
+
+
+def potential_energy(theta, scene, d):
+    """$E_b$ (the statics' function) plus gravity on the free nodes."""
+    e = bending_energy(theta, scene, d)
+    if scene.gravity is not None:
+        x = jnp.cumsum(d.h * jnp.sin(theta))
+        e = e + scene.gravity.g * jnp.sum(d.node_mass[1:-1] * x[:-1])
+    return e
+
+
+def kinetic_energy(theta, omega, d):
+    _, v = kinematics(theta, omega, d)
+    return 0.5 * jnp.sum(d.node_mass[1:-1] * jnp.sum(v[1:-1] ** 2, -1))
+
+
+def accelerations(t, y, scene, protocol, dissipation, baumgarte):
+    r"""$\ddot\theta(t,\theta,\dot\theta)$, see the module docstring."""
+    theta, omega = y[0], y[1]
+    aL, aR, rL, rR = protocol.angles(t)
+    sc = scene_at(scene, aL, aR)
+    d = discretize(sc)
+    Q = -jax.grad(bending_energy)(theta, sc, d)
+    eta = dissipation.viscosity
+    full_rate = jnp.concatenate([rL[None], omega, -rR[None]])
+    # Rayleigh dissipation: dR/d(omega_i) with phi_k-dot = diff(full_rate)
+    phidot = jnp.diff(full_rate)
+    tau = eta * phidot / d.ell  # (N+1,) hinge viscous moments
+    Q = Q + (tau[1:] - tau[:-1])
+    x, v = kinematics(theta, omega, d)
+    tt = jnp.stack([jnp.cos(theta), jnp.sin(theta)], -1)
+    nn = jnp.stack([-jnp.sin(theta), jnp.cos(theta)], -1)
+    m = d.node_mass
+    # node forces (N+1, 2)
+    pair = (Q / d.h)[:, None] * nn
+    f = jnp.zeros_like(x).at[1:].add(pair).at[:-1].add(-pair)
+    lam = sc.strip.line_density
+    if sc.gravity is not None:
+        f = f.at[:, 1].add(-m * sc.gravity.g)
+    f = f - dissipation.damping * m[:, None] * v
+    speed = jnp.sqrt(jnp.sum(v**2, -1) + jnp.finfo(v.dtype).tiny)
+    f = f - dissipation.drag * (m / lam)[:, None] * speed[:, None] * v
+    invm = jnp.concatenate([jnp.zeros(1, m.dtype), 1.0 / m[1:-1], jnp.zeros(1, m.dtype)])
+    # prescribed accelerations of the end nodes (node N: Baumgarte-stabilized end condition)
+    target = jnp.stack([sc.clamps.gap, jnp.zeros((), x.dtype)])
+    a_fix = jnp.zeros_like(x).at[-1].set(-2.0 * baumgarte * v[-1] - baumgarte**2 * (x[-1] - target))
+    b = invm[:, None] * f + a_fix  # acceleration without tensions
+    c = jnp.sum(tt[1:] * tt[:-1], -1)  # (N-1,)
+    diag = -(invm[1:] + invm[:-1])
+    lower = jnp.concatenate([jnp.zeros(1, c.dtype), c * invm[1:-1]])
+    upper = jnp.concatenate([c * invm[1:-1], jnp.zeros(1, c.dtype)])
+    rhs = -d.h * omega**2 - jnp.sum(tt * (b[1:] - b[:-1]), -1)
+    T = lax.linalg.tridiagonal_solve(lower, diag, upper, rhs[:, None])[:, 0]
+    F_t = jnp.zeros_like(x).at[:-1].add(T[:, None] * tt).at[1:].add(-T[:, None] * tt)
+    a = b + invm[:, None] * F_t
+    return jnp.sum(nn * (a[1:] - a[:-1]), -1) / d.h
+
+
+def vector_field(t, y, args):
+    """diffrax vector field: y = (theta, omega) stacked, shape (2, N)."""
+    scene, protocol, dissipation, baumgarte = args
+    return jnp.stack([y[1], accelerations(t, y, scene, protocol, dissipation, baumgarte)])
+
+
+def observables(t, y, scene, protocol):
+    """Fold height, fold speed |dx/dt| at s = L/2, bending and kinetic energy, max node speed,
+    end-constraint error."""
+    theta, omega = y[0], y[1]
+    aL, aR, _, _ = protocol.angles(t)
+    sc = scene_at(scene, aL, aR)
+    d = discretize(sc)
+    x, v = kinematics(theta, omega, d)
+    k = sc.mesh.n // 2
+    speed = jnp.sqrt(jnp.sum(v**2, -1))
+    target = jnp.stack([sc.clamps.gap, jnp.zeros((), x.dtype)])
+    return dict(
+        fold_height=x[k, 1],
+        fold_velocity=v[k],
+        fold_speed=speed[k],
+        bending=bending_energy(theta, sc, d),
+        potential=potential_energy(theta, sc, d),
+        kinetic=kinetic_energy(theta, omega, d),
+        constraint=jnp.sqrt(jnp.sum((x[-1] - target) ** 2)),
+        speed=speed,
+        positions=x,
+    )
+
+
+__all__ = ["Protocol", "Dissipation", "vector_field", "observables", "turning_angles"]

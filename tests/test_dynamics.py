@@ -1,0 +1,125 @@
+"""Snap dynamics on the statics' energy (jaxrod._dynamics*): equations, energy balance,
+convergence, scenes, bad input. Small meshes (N = 24) keep the explicit runs short."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxrod as jr
+from jaxrod._dynamics import accelerations, scene_at
+from jaxrod._energy.bending import bending_energy
+from jaxrod._energy.geometry import discretize
+
+
+N = 24
+
+
+@pytest.fixture(scope="module")
+def snap30():
+    sc = jr.make_scene(30, 0.5, 0, n=N)
+    return sc, jr.snap_angles(sc)
+
+
+@pytest.fixture(scope="module")
+def brink_run(snap30):
+    sc, snap = snap30
+    start = jr.brink(sc, "up", snap=snap, nudge=0.05)
+    runs = {tol: jr.simulate(start.scene, start.theta0, start.protocol, direction=1.0, t1=3.0, rtol=tol, atol=tol)
+            for tol in (1e-4, 1e-6, 1e-8)}
+    return start, runs
+
+
+def test_accelerations_match_dense_lagrange_equations():
+    """The O(N) tension solve equals Lagrange's equations with the dense mass matrix
+    M = J^T diag(m) J and the end constraint as a multiplier (moving clamps, random state)."""
+    sc = jr.make_scene(60, 0.5, 0, n=12)
+    d0 = discretize(sc)
+    th = jnp.linspace(-0.8, 0.9, 12) + 0.1 * jnp.sin(jnp.arange(12.0) * 2.3)
+    om = jnp.cos(jnp.arange(12.0) * 1.7)
+    prot = jr.Protocol(0.1, 0.2, 0.3, -0.4)
+    acc = accelerations(0.5, jnp.stack([th, om]), sc, prot, jr.Dissipation(), 0.0)
+    s2 = scene_at(sc, *prot.angles(0.5)[:2])
+    d = discretize(s2)
+    h, m = d.h, d0.node_mass.at[0].set(0.0).at[-1].set(0.0)
+    n = jnp.stack([-jnp.sin(th), jnp.cos(th)], -1)
+    t = jnp.stack([jnp.cos(th), jnp.sin(th)], -1)
+    lower = (jnp.arange(13)[:, None] > jnp.arange(12)[None, :]).astype(float)  # node k moves with segments i < k
+    J = lower[:, :, None] * (h[:, None] * n)[None]
+    M = jnp.einsum("k,kia,kja->ij", m, J, J)
+    a_c = jnp.concatenate([jnp.zeros((1, 2)), jnp.cumsum(-(h * om**2)[:, None] * t, 0)])
+    Q = -jax.grad(bending_energy)(th, s2, d)
+    A = (h[:, None] * n).T
+    K = jnp.block([[M, A.T], [A, jnp.zeros((2, 2))]])
+    rhs = jnp.concatenate([Q - jnp.einsum("k,kia,ka->i", m, J, a_c), (h * om**2) @ t])
+    ref = jnp.linalg.solve(K, rhs)[:12]
+    assert float(jnp.max(jnp.abs(acc - ref)) / jnp.max(jnp.abs(ref))) < 1e-11
+
+
+def test_undamped_energy_is_conserved(brink_run):
+    """E_k + V is conserved to the integrator tolerance (fixed clamps, no dissipation), and
+    the end condition holds (Baumgarte)."""
+    _, runs = brink_run
+    tr = runs[1e-8]
+    assert bool(tr.snapped)
+    assert float(tr.energy_drift) < 1e-7
+    assert float(jnp.nanmax(jnp.where(jnp.isfinite(tr.constraint), tr.constraint, jnp.nan))) < 1e-8
+    # the drift shrinks with the tolerance
+    assert float(runs[1e-4].energy_drift) > float(runs[1e-8].energy_drift)
+
+
+def test_vs_converges_with_tolerance(brink_run):
+    _, runs = brink_run
+    v = {k: float(r.v_s) for k, r in runs.items()}
+    e4, e6 = abs(v[1e-4] - v[1e-8]), abs(v[1e-6] - v[1e-8])
+    assert e6 < e4
+    assert e6 / v[1e-8] < 1e-4
+
+
+def test_energy_trade_at_snap(brink_run):
+    """The bending energy of the critical state is mostly turned into kinetic energy (paper)."""
+    start, runs = brink_run
+    tr = runs[1e-8]
+    ratio = float(tr.kinetic_peak / start.bending_before)
+    assert 0.5 < ratio < 1.0
+
+
+def test_damping_dissipates(snap30):
+    sc, snap = snap30
+    start = jr.brink(sc, "up", snap=snap, nudge=0.05)
+    free = jr.simulate(start.scene, start.theta0, start.protocol, t1=3.0, rtol=1e-6, atol=1e-6)
+    damped = jr.simulate(start.scene, start.theta0, start.protocol, t1=3.0, rtol=1e-6, atol=1e-6,
+                         dissipation=jr.Dissipation(damping=2.0))
+    assert float(damped.v_s) < float(free.v_s)
+    assert math.isnan(float(damped.energy_drift))
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    (dict(solver="rk4"), "solver"),
+])
+def test_bad_solver(kwargs, name, snap30):
+    sc, _ = snap30
+    with pytest.raises(ValueError, match=name):
+        jr.simulate(sc, jnp.zeros(N), jr.Protocol(), **kwargs)
+
+
+def test_bad_input():
+    sc = jr.make_scene(30, 0.5, 0, n=N)
+    with pytest.raises(ValueError, match="stretching"):
+        jr.simulate(jr.make_scene(30, 0.5, 0, n=N, stretching=jr.Stretching(1e6)), jnp.zeros(N), jr.Protocol())
+    with pytest.raises(ValueError, match="direction"):
+        jr.brink(sc, "sideways")
+    with pytest.raises(ValueError, match="nudge"):
+        jr.brink(sc, "up", nudge=float("nan"))
+    with pytest.raises(ValueError, match="rate"):
+        jr.ramp(sc, "up", rate=-1.0, alpha_start=0.0)
+    with pytest.raises(ValueError, match="damping"):
+        jr.Dissipation(damping=-1.0)
+    with pytest.raises(ValueError, match="rate_left"):
+        jr.Protocol(rate_left=float("nan"))
+    with pytest.raises(ValueError, match="float64"):
+        jr.simulate(sc, jnp.zeros(N, jnp.float32), jr.Protocol())
+    with pytest.raises(ValueError, match="kind"):
+        jr.snap_dynamics(sc, kind="wobble")
