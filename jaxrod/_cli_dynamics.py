@@ -4,8 +4,289 @@ Each module in `jaxrod._cli._COMMAND_MODULES` defines `register(sub)`, which add
 subparsers to the `jaxrod` parser and attaches `handler=<function(args) -> exit code>`
 with `set_defaults`. Shared pieces: `jaxrod._cli.add_scene_args`, `make_scene_from_args`,
 `InputError` (one-line error, exit 2), `EXIT_OK`, `EXIT_USAGE`, `EXIT_NOT_CONVERGED`.
+
+`jaxrod snap` integrates one snap (brink, ramp or asymmetric scene) and prints v_s in
+units of v* (and in m/s when the strip's material is given); `jaxrod speed-plane` runs
+the grid Psi0 x G/L of brink snaps, appends each point to `DIR/speed_plane.csv` as it is
+done (a rerun skips the points already there), fits v_s/v* = v_m - a G/L - b Psi0 and
+draws `DIR/speed_plane.png`.
 """
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+
+from ._cli import EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, add_scene_args, make_scene_from_args
+
+PAPER_FIT = (42.59, 30.38, 5.00)
+
+
+def _add_run_args(p):
+    g = p.add_argument_group("dynamics")
+    g.add_argument("--direction", choices=("up", "down"), default="up", help="snap up or down (default up)")
+    g.add_argument("--nudge", type=float, default=0.05, help="brink: nudge along the unstable mode, rad (default 0.05)")
+    g.add_argument("--rate", type=float, default=0.5, help="ramp/asymmetric: clamp rate, rad per T (default 0.5)")
+    g.add_argument("--solver", default="tsit5", help="tsit5 (default), dopri5, dopri8, kvaerno3, kvaerno5")
+    g.add_argument("--rtol", type=float, default=1e-6, help="relative = absolute tolerance (default 1e-6)")
+    g.add_argument("--t1", type=float, default=4.0, help="time limit in T (default 4)")
 
 
 def register(sub):
-    """Add this module's subcommands to the `jaxrod` argument parser (none yet)."""
+    """Add `snap` and `speed-plane` to the `jaxrod` argument parser."""
+    p = sub.add_parser("snap", help="integrate one dynamic snap, report the snapping speed v_s")
+    add_scene_args(p)
+    p.add_argument("--scene", choices=("brink", "ramp", "asymmetric"), default="brink",
+                   help="brink (critical state nudged), ramp (clamps rotated through alpha_c), asymmetric "
+                        "(only the right clamp rotated from --alpha-right, left held at --alpha)")
+    _add_run_args(p)
+    m = p.add_argument_group("physical units (all five to report m/s and s)")
+    for name in ("youngs-modulus", "density", "thickness", "width", "length"):
+        m.add_argument(f"--{name}", type=float, default=None)
+    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p.add_argument("--plot", metavar="DIR", default=None, help="write fold.png, speed_map.png, energies.png, chrono.png")
+    p.add_argument("--animate", metavar="FILE.gif", default=None, help="write an animated GIF of the snap")
+    p.set_defaults(handler=_cmd_snap)
+
+    q = sub.add_parser("speed-plane", help="v_s over Psi0 x G/L (brink snaps), CSV + fit + figure; resumable")
+    q.add_argument("--out", metavar="DIR", default="jaxrod-speed-plane")
+    q.add_argument("--psi0", default="30,60,90,120,180", help="comma-separated fold angles, deg")
+    q.add_argument("--gaps", default="0.3,0.4,0.5,0.6,0.7", help="comma-separated G/L")
+    q.add_argument("--n", type=int, default=60, help="segments (default 60)")
+    q.add_argument("--s0", type=float, default=0.02)
+    _add_run_args(q)
+    q.set_defaults(handler=_cmd_speed_plane)
+
+
+def _check_run_args(args):
+    import jaxrod as jr
+
+    if args.solver not in jr._dynamics_solve.SOLVERS:
+        raise InputError(f"solver must be one of {sorted(jr._dynamics_solve.SOLVERS)}, got {args.solver!r}")
+    for name in ("nudge", "rate", "rtol", "t1"):
+        v = getattr(args, name)
+        if not (math.isfinite(v) and v > 0):
+            raise InputError(f"{name} must be a finite number > 0, got {v!r}")
+
+
+def _physical(args):
+    vals = [getattr(args, k) for k in ("youngs_modulus", "density", "thickness", "width", "length")]
+    if all(v is None for v in vals):
+        return None
+    if any(v is None for v in vals):
+        raise InputError("youngs-modulus, density, thickness, width, length: give all five or none")
+    import jaxrod as jr
+
+    try:
+        st = jr.Strip.from_physical(youngs_modulus=vals[0], density=vals[1], thickness=vals[2], width=vals[3],
+                                    length=vals[4])
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    return float(st.speed_gauge), float(st.time_unit)
+
+
+def run_snap(scene, args, kind):
+    import jaxrod as jr
+
+    kw = dict(solver=args.solver, rtol=args.rtol, atol=args.rtol, t1=args.t1)
+    try:
+        if kind == "asymmetric":
+            start, tr = jr.snap_dynamics(scene, args.direction, kind="asymmetric", rate=args.rate,
+                                         alpha_start=float(scene.clamps.alpha_right), **kw)
+        else:
+            start, tr = jr.snap_dynamics(scene, args.direction, kind=kind, nudge=args.nudge, rate=args.rate, **kw)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    return start, tr
+
+
+def _record(start, tr, phys=None):
+    import numpy as np
+
+    def f(x):
+        x = float(x)
+        return x if math.isfinite(x) else None
+
+    t = np.asarray(tr.t)
+    fs = np.asarray(tr.fold_speed)
+    ok = np.isfinite(fs)
+    # snap duration: time the fold speed stays above half its peak
+    above = t[ok][fs[ok] >= 0.5 * float(tr.v_s)]
+    duration = float(above[-1] - above[0]) if above.size else float("nan")
+    import diffrax as dfx
+
+    solved = bool(start.ok) and bool((tr.result == dfx.RESULTS.successful)
+                                     | (tr.result == dfx.RESULTS.event_occurred))
+    rec = dict(
+        alpha_c_deg=f(np.degrees(float(start.alpha_c))),
+        snapped=bool(tr.snapped),
+        v_s=f(tr.v_s),
+        t_peak=f(tr.t_peak),
+        t_snap=f(tr.t_cross),
+        snap_duration=f(duration),
+        t_end=f(tr.t_end),
+        bending_energy_before=f(start.bending_before),
+        kinetic_energy_peak=f(tr.kinetic_peak),
+        energy_drift=f(tr.energy_drift),
+        num_steps=int(tr.num_steps),
+        converged=solved,
+        units="L = B = lambda = 1: speeds in v*, times in T = L/v*, energies in B/L",
+    )
+    if phys is not None:
+        vstar, T = phys
+        rec.update(v_s_m_per_s=f(float(tr.v_s) * vstar), t_snap_s=f(float(tr.t_cross) * T),
+                   snap_duration_s=f(duration * T), v_star_m_per_s=vstar, time_unit_s=T)
+    return rec
+
+
+def _cmd_snap(args):
+    _check_run_args(args)
+    phys = _physical(args)
+    scene = _array_leaves(make_scene_from_args(args))
+    start, tr = run_snap(scene, args, args.scene)
+    rec = _record(start, tr, phys)
+    import jaxrod as jr
+
+    from ._plot_dynamics import animate_snap, plot_snap
+
+    if args.plot or args.animate:
+        # rerun with the frames on the snap itself (a few durations before the peak to the end)
+        dur = rec["snap_duration"] or 0.05
+        ta = max(0.0, float(tr.t_peak) - 4.0 * dur)
+        tb = float(tr.t_end)
+        tr = jr.simulate(start.scene, start.theta0, start.protocol, direction=start.direction, t1=tb,
+                         stop_at_snap=False, solver=args.solver, rtol=args.rtol, atol=args.rtol,
+                         frame_window=(ta, tb), n_frames=48)
+    try:
+        if args.plot:
+            rec["figures"] = plot_snap(tr, args.plot, title=f"Psi0 = {args.psi0:g} deg, G/L = {args.gap:g}")
+        if args.animate:
+            rec["animation"] = animate_snap(tr, args.animate)
+    except OSError as e:
+        raise InputError(f"plot/animate: cannot write: {e.strerror or e}") from None
+    if args.json:
+        print(json.dumps(rec))
+    else:
+        for k, v in rec.items():
+            print(f"{k:24s} {v}")
+    return EXIT_OK if rec["converged"] else EXIT_NOT_CONVERGED
+
+
+FIELDS = ["psi0_deg", "gap", "n", "snaps", "alpha_c_deg", "v_s", "t_snap", "kinetic_energy_peak",
+          "bending_energy_before", "num_steps"]
+
+
+def fit_plane(rows):
+    """Least-squares v_s = v_m - a G - b Psi0 (Psi0 in rad) over the snapping rows; returns
+    (v_m, a, b), their standard errors, and the rms residual."""
+    import numpy as np
+
+    r = [x for x in rows if x["snaps"] and x["v_s"] is not None and math.isfinite(x["v_s"])]
+    G = np.array([x["gap"] for x in r])
+    P = np.radians([x["psi0_deg"] for x in r])
+    v = np.array([x["v_s"] for x in r])
+    A = np.stack([np.ones_like(G), -G, -P], 1)
+    coef, *_ = np.linalg.lstsq(A, v, rcond=None)
+    res = v - A @ coef
+    dof = max(len(v) - 3, 1)
+    cov = np.linalg.inv(A.T @ A) * (res @ res) / dof
+    return coef.tolist(), np.sqrt(np.diag(cov)).tolist(), float(np.sqrt(np.mean(res**2)))
+
+
+def _read_rows(path):
+    if not os.path.exists(path):
+        return []
+    rows = []
+    with open(path) as fh:
+        for r in csv.DictReader(fh):
+            rows.append(dict(psi0_deg=float(r["psi0_deg"]), gap=float(r["gap"]), n=int(r["n"]),
+                             snaps=r["snaps"] == "True",
+                             **{k: (float(r[k]) if r[k] not in ("", "None", "nan") else None)
+                                for k in FIELDS[4:]}))
+    return rows
+
+
+def _cmd_speed_plane(args):
+    import numpy as np
+    from tqdm import tqdm
+
+    import jaxrod as jr
+
+    _check_run_args(args)
+    try:
+        psis = [float(x) for x in args.psi0.split(",")]
+        gaps = [float(x) for x in args.gaps.split(",")]
+    except ValueError:
+        raise InputError("psi0/gaps: comma-separated numbers expected") from None
+    try:
+        for p in psis:
+            for g in gaps:
+                jr.make_scene(p, g, 0, s0=args.s0, n=args.n)
+        os.makedirs(args.out, exist_ok=True)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    except OSError as e:
+        raise InputError(f"out: cannot create {args.out!r}: {e.strerror or e}") from None
+    path = os.path.join(args.out, "speed_plane.csv")
+    rows = _read_rows(path)
+    done = {(r["psi0_deg"], r["gap"], r["n"]) for r in rows}
+    todo = [(p, g) for p in psis for g in gaps if (p, g, args.n) not in done]
+    new = not os.path.exists(path)
+    with open(path, "a", newline="") as fh:
+        w = csv.DictWriter(fh, FIELDS)
+        if new:
+            w.writeheader()
+        for p, g in tqdm(todo, desc="speed plane", unit="strip"):
+            scene = _array_leaves(jr.make_scene(p, g, 0, s0=args.s0, n=args.n))
+            snap = jr.snap_angles(scene)
+            path_ = snap.up if args.direction == "up" else snap.down
+            row = dict(psi0_deg=p, gap=g, n=args.n, snaps=bool(path_.snaps))
+            if row["snaps"]:
+                start, tr = jr.snap_dynamics(scene, args.direction, kind="brink", nudge=args.nudge, snap=snap,
+                                             solver=args.solver, rtol=args.rtol, atol=args.rtol, t1=args.t1)
+                row.update(alpha_c_deg=float(np.degrees(start.alpha_c)), v_s=float(tr.v_s),
+                           t_snap=float(tr.t_cross), kinetic_energy_peak=float(tr.kinetic_peak),
+                           bending_energy_before=float(start.bending_before), num_steps=int(tr.num_steps))
+                row["snaps"] = bool(tr.snapped)
+            w.writerow(row)
+            fh.flush()
+            rows.append({k: row.get(k) for k in FIELDS})
+    rows = [r for r in rows if r["n"] == args.n and r["psi0_deg"] in psis and r["gap"] in gaps]
+    out = dict(points=len(rows), snapping=sum(bool(r["snaps"]) for r in rows), csv=path)
+    if out["snapping"] >= 4:
+        coef, err, rms = fit_plane(rows)
+        out.update(fit=dict(v_m=coef[0], a=coef[1], b=coef[2], stderr=err, rms=rms),
+                   paper=dict(v_m=PAPER_FIT[0], a=PAPER_FIT[1], b=PAPER_FIT[2]))
+        _plot_plane(rows, coef, os.path.join(args.out, "speed_plane.png"))
+        out["figure"] = os.path.join(args.out, "speed_plane.png")
+    with open(os.path.join(args.out, "speed_plane_fit.json"), "w") as fh:
+        json.dump(out, fh, indent=1)
+    print(json.dumps(out))
+    return EXIT_OK
+
+
+def _plot_plane(rows, coef, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    psis = sorted({r["psi0_deg"] for r in rows})
+    g = np.linspace(0.25, 0.75, 20)
+    for i, p in enumerate(psis):
+        r = sorted([x for x in rows if x["psi0_deg"] == p and x["snaps"]], key=lambda x: x["gap"])
+        c = f"C{i}"
+        ax.plot([x["gap"] for x in r], [x["v_s"] for x in r], "o", color=c, label=f"Psi0 = {p:g} deg")
+        ax.plot(g, coef[0] - coef[1] * g - coef[2] * np.radians(p), "-", color=c, lw=0.8)
+        ax.plot(g, PAPER_FIT[0] - PAPER_FIT[1] * g - PAPER_FIT[2] * np.radians(p), ":", color=c, lw=0.8)
+    ax.set_xlabel("G / L")
+    ax.set_ylabel("v_s / v*")
+    ax.set_title("brink snaps: points; fit (solid); paper's plane (dotted)")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

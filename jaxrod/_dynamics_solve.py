@@ -111,14 +111,15 @@ def _refine_peak(t, f):
 def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, direction=1.0,
              stop_at_snap: bool = True, solver: str = "tsit5", rtol=1e-8, atol=1e-8, dt=None,
              dissipation: Dissipation = Dissipation(), baumgarte=20.0, n_fine: int = 4096,
-             n_frames: int = 64, max_steps: int = 200_000) -> Trajectory:
+             n_frames: int = 64, frame_window=None, max_steps: int = 200_000) -> Trajectory:
     r"""Integrate the strip from angles `theta0` (and rates `omega0`, default 0) under the
     clamp `protocol` for $t\in[0,t_1]$ (see the module docstring).
 
     **Arguments:** `direction` +1 for a snap up (fold height rising through 0), -1 down;
     `stop_at_snap` stop at the first overshoot after the crossing; `solver` a key of
     `SOLVERS`; `rtol`, `atol` the PID controller's tolerances, or `dt` a constant step
-    (then no error control); `baumgarte` $\Omega$ of the end-condition stabilization.
+    (then no error control); `baumgarte` $\Omega$ of the end-condition stabilization;
+    `frame_window` (t_a, t_b) the span of the `n_frames` frames (default (0, t1)).
 
     **Returns:** a [`jaxrod.Trajectory`][].
     """
@@ -134,7 +135,9 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     y0 = (jnp.stack([theta0, omega0]), jnp.zeros((), dtype))
     args = (scene, protocol, dissipation, jnp.asarray(baumgarte, dtype))
     ts = jnp.linspace(0.0, t1, n_fine)
-    tf = jnp.linspace(0.0, t1, n_frames)
+    if frame_window is None:
+        frame_window = (0.0, t1)
+    tf = jnp.linspace(jnp.asarray(frame_window[0], dtype), jnp.asarray(frame_window[1], dtype), n_frames)
 
     def obs(t, y, a):
         o = observables(t, y[0], scene, protocol)

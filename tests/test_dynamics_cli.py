@@ -1,0 +1,35 @@
+"""`jaxrod snap` / `jaxrod speed-plane`: errors are one line with exit 2; a run prints one JSON object."""
+
+import json
+
+import pytest
+
+from jaxrod._cli import main
+
+
+@pytest.mark.parametrize("argv, name", [
+    (["snap", "--gap", "1.5"], "gap"),
+    (["snap", "--psi0", "nan"], "psi0"),
+    (["snap", "--solver", "rk4"], "solver"),
+    (["snap", "--nudge", "-1"], "nudge"),
+    (["snap", "--n", "7"], "n"),
+    (["snap", "--density", "1000"], "youngs-modulus"),
+    (["speed-plane", "--gaps", "0.5,x"], "gaps"),
+    (["speed-plane", "--psi0", "200"], "psi0"),
+])
+def test_bad_input_one_line_exit_2(argv, name, capsys):
+    assert main(argv + ["--json"] if argv[0] == "snap" else argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and name in err[0] and "Traceback" not in err[0]
+
+
+@pytest.mark.slow
+def test_snap_json(capsys, tmp_path):
+    rc = main(["snap", "--psi0", "30", "--gap", "0.5", "--n", "24", "--json", "--plot", str(tmp_path)])
+    out = capsys.readouterr().out.strip().splitlines()
+    assert rc == 0 and len(out) == 1
+    rec = json.loads(out[0])
+    for k in ("alpha_c_deg", "v_s", "t_snap", "bending_energy_before", "kinetic_energy_peak", "energy_drift"):
+        assert rec[k] is not None
+    assert rec["snapped"] and rec["energy_drift"] < 1e-5
+    assert (tmp_path / "speed_map.png").exists()
