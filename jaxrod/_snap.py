@@ -34,6 +34,7 @@ from ._continuation import (
     require_float64,
     corrector,
 )
+from ._critical import critical_point
 from ._energy.geometry import discretize
 from ._energy.lagrangian import positions
 from ._equilibrium import Newton, _float_scene, solve_equilibrium
@@ -54,7 +55,13 @@ class SnapPath(eqx.Module):
     `fold_height_before`, `theta_after`/`fold_height_after` the state it lands in,
     `branch` the continuation stages (leading axis: stage; a supercritical branch point
     is followed by a second stage on the asymmetric branch), `result` (a RESULTS code for the start
-    state)."""
+    state), `refine_result` (the RESULTS code of the extended-system refinement of the
+    critical point, `jaxrod.critical_point`; where it fails the bisection values are kept),
+    `mode` the critical mode (angle part, unit $L^2$ norm).
+
+    `alpha_c`, `theta_before`, `force_before` and `fold_height_before` are differentiable
+    with respect to the float leaves of the scene (implicit differentiation of the
+    extended system; the discrete search itself carries no gradient)."""
 
     snaps: Array
     alpha_c: Array
@@ -67,6 +74,8 @@ class SnapPath(eqx.Module):
     fold_height_after: Array
     branch: object
     result: RESULTS
+    refine_result: RESULTS | None = None
+    mode: Array | None = None
 
 
 def _fh(scene, parameter, t, m, lam):
@@ -216,7 +225,8 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     `alpha_c=NaN`, kind "none").
     """
     parameter = SymmetricAlpha()
-    scene = lax.stop_gradient(parameter.set(_float_scene(scene), 0.0))
+    scene_d = parameter.set(_float_scene(scene), 0.0)  # carries gradients to the refinement
+    scene = lax.stop_gradient(scene_d)
     dtype = jnp.result_type(scene.strip.psi0)
     require_float64(dtype, "snap_angles")
     tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
@@ -240,4 +250,29 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     )
     start_eq = eqx.combine(start_eq, eqx.filter(down_eq, eqx.is_array, inverse=True))
     up = _path(scene, start_eq, 1.0, parameter, settings, bound, bisections, tol)
-    return SnapAngles(up=up, down=down)
+    return SnapAngles(up=_polish(scene_d, up, parameter), down=_polish(scene_d, down, parameter))
+
+
+def _polish(scene_d, path, parameter):
+    """Refine the bisection result on the extended system (`jaxrod.critical_point`): the
+    differentiable alpha_c and critical state. Kept from bisection where it fails."""
+    sg = lax.stop_gradient
+    a0 = jnp.where(path.snaps, path.alpha_c, 0.0)
+    sc = parameter.set(sg(scene_d), a0)
+    K = _kkt.structured(path.theta_before, path.force_before, sc)
+    v = _kkt.modes(K, _kkt.smallest_eigenvalues(K, 1))[:, 0]
+    kind = jnp.where(path.kind == KIND_NONE, KIND_FOLD, path.kind)
+    cp = critical_point(scene_d, path.theta_before, path.force_before, a0, v, kind, parameter=parameter)
+    # accept only a converged refinement that stays at the bisection point (1e-6 rad)
+    ok = path.snaps & (cp.result == RESULTS.successful) & (jnp.abs(sg(cp.alpha) - a0) < 1e-6)
+    pick = lambda new, old: jnp.where(ok, new, old)  # noqa: E731
+    refine_result = RESULTS.where(path.snaps, cp.result, RESULTS.successful)
+    refine_result = RESULTS.where(ok | ~path.snaps, refine_result, RESULTS.where(
+        cp.result == RESULTS.successful, RESULTS.max_steps_reached, cp.result))
+    return eqx.tree_at(
+        lambda p: (p.alpha_c, p.theta_before, p.force_before, p.fold_height_before, p.refine_result, p.mode),
+        path,
+        (pick(cp.alpha, path.alpha_c), pick(cp.theta, path.theta_before), pick(cp.force, path.force_before),
+         pick(cp.fold_height, path.fold_height_before), refine_result, jnp.where(ok, cp.mode, v)),
+        is_leaf=lambda x: x is None,
+    )

@@ -1,0 +1,182 @@
+r"""Termination gap $G^\ast(\Psi_0)$: the gap beyond which a snapping path no longer snaps.
+
+For each path (snap up, snap down) [`jaxrod.snap_angles`][] answers "does it snap at this
+gap". $G^\ast$ is located by
+
+1. a scan over a grid of gaps $G/L\in(0,1)$ (default 0.05, 0.10, ..., 0.95, 0.99):
+   the bracket is the largest grid gap that snaps and the next grid gap, which does not;
+2. bisection of that bracket on the same yes/no answer down to `tol` in $G/L$
+   (default $10^{-5}$, i.e. a bracket $[G^\ast_-, G^\ast_+]$ of that width; $G^\ast$ is its midpoint).
+
+This is the same criterion that the phase diagram of snap angles uses, so the reported
+$G^\ast$ is consistent with `snap_angles` by construction (`tests/test_termination.py`
+checks it just below and just above). `snap_angles` counts a loss of stability as a snap
+when the relaxed landing state lies more than `jaxrod._snap.JUMP_DISTANCE` ($L^2$ norm of
+the angle field) away; otherwise it follows the new stable branch (a supercritical branch
+point) and looks for the next loss of stability. Near $G^\ast$ the jump shrinks
+continuously (the fold pair merging at a cusp, or the landing state joining the critical
+one), so this criterion's $G^\ast$ is where the jump reaches that size; the reported
+`jump_*` (the fold height change at $G^\ast_-$) says how large the snap still is there.
+
+What ends each path (`reason_*`):
+- `"cusp"`: just below $G^\ast$ the path loses stability at a fold and the jump is small
+  (the fold pair meets);
+- `"supercritical"`: the last snap is at a branch point with a small jump (the landing
+  state joins the critical state);
+- `"start_state_lost"`: the path's start state (up state, or the down state at
+  $\alpha=0$) stops existing at $G^\ast_+$;
+- `"no_termination"`: it still snaps at the largest grid gap (the flat strip,
+  $\Psi_0=180^\circ$, never stops snapping: $G^\ast=1$, i.e. $L$);
+- `"never_snaps"`: no grid gap snaps ($G^\ast$ is NaN).
+
+The derivative $dG^\ast/d\Psi_0$ is not provided: $G^\ast$ is the end of a discrete
+search, and (see the README) an implicit derivative needs the cusp system.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._misc import check_param
+from ._rod import make_scene
+from ._solution import RESULTS
+
+
+DEFAULT_GRID = tuple(np.round(np.arange(0.05, 0.951, 0.05), 4)) + (0.99,)
+SMALL_JUMP = 0.15  # |fold height change| / L below which the end is "continuous"
+
+
+class TerminationGap(NamedTuple):
+    """`gap_up`, `gap_down` ($G^\\ast/L$; 1.0 where the path never stops snapping, NaN where it
+    never snaps), `bracket_up`/`bracket_down` ($(G^\\ast_-, G^\\ast_+)$), `reason_up`/
+    `reason_down` (see the module docstring), `kind_up`/`kind_down` (instability kind at
+    $G^\\ast_-$: "fold", "branch_point" or "none"), `alpha_c_up`/`alpha_c_down` (rad, at
+    $G^\\ast_-$), `jump_up`/`jump_down` (fold-height change of the snap at $G^\\ast_-$),
+    `evaluations` (number of `snap_angles` calls)."""
+
+    psi0_deg: float
+    gap_up: float
+    gap_down: float
+    bracket_up: tuple
+    bracket_down: tuple
+    reason_up: str
+    reason_down: str
+    kind_up: str
+    kind_down: str
+    alpha_c_up: float
+    alpha_c_down: float
+    jump_up: float
+    jump_down: float
+    evaluations: int
+
+    def to_dict(self):
+        def clean(x):
+            if isinstance(x, float) and not math.isfinite(x):
+                return None
+            if isinstance(x, tuple):
+                return [clean(v) for v in x]
+            return x
+
+        return {k: clean(v) for k, v in self._asdict().items()}
+
+
+@eqx.filter_jit
+def _snap_at(base, psi0, gap):
+    from ._snap import snap_angles
+
+    scene = eqx.tree_at(lambda s: (s.strip.psi0, s.clamps.gap), base, (psi0, gap))
+    r = snap_angles(scene)
+    from ._initial import initial_state
+
+    has_down = initial_state(scene, "down").result == RESULTS.successful
+    has_up = initial_state(scene, "up").result == RESULTS.successful
+
+    def summary(p):
+        return dict(snaps=p.snaps, alpha=p.alpha_c, kind=p.kind,
+                    jump=p.fold_height_after - p.fold_height_before)
+
+    return dict(up=summary(r.up), down=summary(r.down), has_up=has_up, has_down=has_down)
+
+
+def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
+                    progress=False) -> TerminationGap:
+    r"""The termination gaps $G^\ast/L$ of the snap-up and snap-down paths at fold angle
+    `psi0_deg` (degrees), by scan + bisection on [`jaxrod.snap_angles`][] (see the module
+    docstring), to `tol` in $G/L$. Needs float64.
+
+    Returns a [`jaxrod.TerminationGap`][]. One compilation per `(n, s0 dtype)`; each
+    evaluation is one `snap_angles` call (~0.3 s at n = 100)."""
+    from ._snap import KIND_NAMES
+
+    check_param("psi0", psi0_deg, lo=0.0, hi=180.0, hi_open=False, unit=" deg")
+    check_param("s0", s0, lo=0.0)
+    check_param("tol", tol, lo=0.0)
+    if jnp.zeros(()).dtype != jnp.float64 and not jax.config.jax_enable_x64:
+        raise ValueError("termination_gap needs float64; enable it with "
+                         "jax.config.update('jax_enable_x64', True)")
+    grid = sorted(float(g) for g in grid)
+    if not grid or grid[0] <= 0.0 or grid[-1] >= 1.0:
+        raise ValueError(f"grid must hold gaps in (0, 1), got {grid!r}")
+    base = make_scene(float(psi0_deg), 0.5, s0=s0, n=n)
+    psi = jnp.asarray(math.radians(float(psi0_deg)))
+    count = [0]
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(desc=f"G*(psi0={psi0_deg:g})", unit="solve")
+
+    def at(g):
+        count[0] += 1
+        if bar is not None:
+            bar.update(1)
+        out = jax.device_get(_snap_at(base, psi, jnp.asarray(float(g))))
+        return out
+
+    scan = [(g, at(g)) for g in grid]
+    results = {}
+    for name in ("up", "down"):
+        snaps = [bool(o[name]["snaps"]) for _, o in scan]
+        if not any(snaps):
+            results[name] = dict(gap=math.nan, bracket=(math.nan, math.nan), reason="never_snaps", kind="none",
+                                 alpha=math.nan, jump=math.nan)
+            continue
+        i = max(k for k, s in enumerate(snaps) if s)
+        if i == len(grid) - 1:
+            o = scan[i][1][name]
+            results[name] = dict(gap=1.0, bracket=(grid[-1], 1.0), reason="no_termination",
+                                 kind=KIND_NAMES[int(o["kind"])], alpha=float(o["alpha"]), jump=float(o["jump"]))
+            continue
+        lo, hi = grid[i], grid[i + 1]
+        o_lo, o_hi = scan[i][1], scan[i + 1][1]
+        while hi - lo > tol:
+            mid = 0.5 * (lo + hi)
+            o = at(mid)
+            if bool(o[name]["snaps"]):
+                lo, o_lo = mid, o
+            else:
+                hi, o_hi = mid, o
+        p = o_lo[name]
+        kind = KIND_NAMES[int(p["kind"])]
+        jump = float(p["jump"])
+        start_ok = bool(o_hi["has_down"]) if name == "up" else bool(o_hi["has_up"])
+        start_ok_lo = bool(o_lo["has_down"]) if name == "up" else bool(o_lo["has_up"])
+        if start_ok_lo and not start_ok:
+            reason = "start_state_lost"
+        elif abs(jump) < SMALL_JUMP:
+            reason = "cusp" if kind == "fold" else "supercritical"
+        else:
+            reason = "snap_vanishes"
+        results[name] = dict(gap=0.5 * (lo + hi), bracket=(lo, hi), reason=reason, kind=kind,
+                             alpha=float(p["alpha"]), jump=jump)
+    if bar is not None:
+        bar.close()
+    u, d = results["up"], results["down"]
+    return TerminationGap(float(psi0_deg), u["gap"], d["gap"], u["bracket"], d["bracket"], u["reason"], d["reason"],
+                          u["kind"], d["kind"], u["alpha"], d["alpha"], u["jump"], d["jump"], count[0])
