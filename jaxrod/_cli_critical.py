@@ -6,6 +6,54 @@ with `set_defaults`. Shared pieces: `jaxrod._cli.add_scene_args`, `make_scene_fr
 `InputError` (one-line error, exit 2), `EXIT_OK`, `EXIT_USAGE`, `EXIT_NOT_CONVERGED`.
 """
 
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
 
 def register(sub):
-    """Add this module's subcommands to the `jaxrod` argument parser (none yet)."""
+    """Add `termination-gap` to the `jaxrod` argument parser."""
+    from ._cli import _EPILOG, _number
+
+    p = sub.add_parser(
+        "termination-gap", help="gap G*/L beyond which each path stops snapping",
+        description="Scan the gap G/L with snap-angles and bisect where each path (snap up, snap down)\n"
+                    "stops snapping, to --tol in G/L. Reports gap_up, gap_down, the bracket, what ends\n"
+                    "each path (cusp, supercritical, start_state_lost, ...) and the instability kind\n"
+                    "just below G*. A flat strip (--psi0 180) never stops snapping (gap 1).",
+        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--psi0", type=_number, default=60.0, metavar="DEG",
+                   help="fold angle Psi0 in (0, 180] degrees (default %(default)g)")
+    p.add_argument("--s0", type=_number, default=0.02, metavar="S0", help="fold width s0/L > 0 (default %(default)g)")
+    p.add_argument("--n", type=int, default=100, metavar="N", help="number of segments, even, >= 8 (default %(default)d)")
+    p.add_argument("--tol", type=_number, default=1e-5, metavar="TOL",
+                   help="bracket width in G/L (default %(default)g)")
+    p.add_argument("--progress", action="store_true", help="show a progress bar on stderr")
+    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p.set_defaults(handler=_cmd_termination_gap)
+
+
+def _cmd_termination_gap(args):
+    from ._cli import EXIT_OK, InputError
+
+    import jaxrod as jr
+
+    if not (math.isfinite(args.tol) and 0.0 < args.tol < 0.1):
+        raise InputError(f"tol must lie in (0, 0.1), got {args.tol!r}")
+    try:
+        jr.make_scene(args.psi0, 0.5, s0=args.s0, n=args.n)  # validates psi0, s0, n
+        r = jr.termination_gap(args.psi0, s0=args.s0, n=args.n, tol=args.tol, progress=args.progress)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    rec = r.to_dict()
+    rec.update(s0=args.s0, n=args.n, tol=args.tol)
+    if args.json:
+        print(json.dumps(rec))
+    else:
+        for name in ("up", "down"):
+            g = rec[f"gap_{name}"]
+            print(f"snap {name:<4}: " + ("never snaps" if g is None else
+                  f"G*/L = {g:.6f} ({rec[f'reason_{name}']}; last snap: {rec[f'kind_{name}']})"))
+    return EXIT_OK

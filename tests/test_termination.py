@@ -1,0 +1,93 @@
+"""Termination gap G*(Psi0) (issue 3): input checks, the flat strip, the CLI; slow: G* for
+Psi0 = 30, 60, 90, 120 deg cross-checked by direct snap_angles calls just below and above."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import jax
+import numpy as np
+import pytest
+
+import jaxrod as jr
+from jaxrod._cli import main
+
+
+jax.config.update("jax_enable_x64", True)
+
+
+@pytest.mark.parametrize("kw,name", [
+    (dict(psi0_deg=0.0), "psi0"), (dict(psi0_deg=181.0), "psi0"), (dict(psi0_deg=float("nan")), "psi0"),
+    (dict(psi0_deg=60.0, s0=0.0), "s0"), (dict(psi0_deg=60.0, n=7), "n"), (dict(psi0_deg=60.0, tol=-1.0), "tol"),
+])
+def test_bad_input_names_parameter(kw, name):
+    with pytest.raises(ValueError, match=name):
+        jr.termination_gap(**kw)
+
+
+def test_flat_strip_never_stops():
+    r = jr.termination_gap(180.0)
+    assert r.gap_up == 1.0 and r.gap_down == 1.0
+    assert r.reason_up == r.reason_down == "flat_strip_never_stops"
+    d = r.to_dict()
+    assert d["bracket_up"] == [None, None] and json.dumps(d)
+
+
+@pytest.mark.parametrize("argv", [
+    ["termination-gap", "--psi0", "0"], ["termination-gap", "--psi0", "nan"], ["termination-gap", "--s0", "-1"],
+    ["termination-gap", "--n", "9"], ["termination-gap", "--tol", "0"], ["termination-gap", "--psi0", "abc"],
+])
+def test_cli_bad_input(argv, capsys):
+    assert main(argv) == 2
+    out = capsys.readouterr()
+    assert out.out == "" and len(out.err.strip().splitlines()) == 1 and "Traceback" not in out.err
+
+
+def test_cli_flat_json(capsys):
+    assert main(["termination-gap", "--psi0", "180", "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["gap_up"] == 1.0 and rec["gap_down"] == 1.0 and rec["reason_up"] == "flat_strip_never_stops"
+
+
+@pytest.fixture(scope="module")
+def snap():
+    f = jax.jit(jr.snap_angles)
+    return lambda psi0, gap: f(jr.make_scene(psi0, gap, 0.0))
+
+
+@pytest.mark.slow
+def test_flat_strip_snaps_near_full_gap(snap):
+    r = snap(180.0, 0.95)
+    for path in (r.up, r.down):
+        assert bool(path.snaps) and int(path.kind) == 2
+        # lands in the mirror state: the fold height changes sign at the same magnitude
+        assert abs(float(path.fold_height_after) + float(path.fold_height_before)) < 0.2 * abs(
+            float(path.fold_height_before))
+
+
+@pytest.mark.slow
+def test_termination_gaps_cross_checked(snap):
+    """G* for Psi0 = 30, 60, 90, 120 deg to 1e-4 in G/L: each path snaps at G* - 1e-4 and does
+    not at G* + 1e-4 (direct snap_angles calls, not the search's own evaluations); G* grows
+    with Psi0 (the paper); Psi0 = 30 deg ends below G/L = 0.8 (no snap there, Fig. 2b)."""
+    out = {}
+    for psi in (30.0, 60.0, 90.0, 120.0):
+        r = jr.termination_gap(psi, tol=1e-5)
+        out[psi] = r
+        for name in ("up", "down"):
+            g = getattr(r, f"gap_{name}")
+            lo, hi = getattr(r, f"bracket_{name}")
+            assert 0.0 < g < 1.0 and hi - lo <= 1e-5
+            below, above = snap(psi, g - 1e-4), snap(psi, g + 1e-4)
+            assert bool(getattr(below, name).snaps), (psi, name, g)
+            assert not bool(getattr(above, name).snaps), (psi, name, g)
+        assert r.reason_down == "cusp" and r.kind_down == "fold"
+    for name in ("up", "down"):
+        gs = [getattr(out[p], f"gap_{name}") for p in (30.0, 60.0, 90.0, 120.0)]
+        assert np.all(np.diff(gs) > 0), (name, gs)
+    assert out[30.0].gap_up < 0.8 and out[30.0].gap_down < 0.8
+    # Psi0 = 30 deg: the snap-up path ends where the down state at alpha = 0 stops existing
+    # (a fold in G of the alpha = 0 branch at G/L ~ 0.645)
+    assert out[30.0].reason_up == "start_state_lost" and abs(out[30.0].gap_up - 0.645) < 2e-3
+    assert all(math.isfinite(out[p].alpha_c_up) for p in out)
