@@ -1,1 +1,34 @@
-"""Inverse design on top of jaxrod (issue 5)."""
+"""Inverse design of creased snapping strips on top of `jaxrod`.
+
+Objectives (`AlphaUp`, `AlphaDown`, `Hysteresis`, `FoldHeight`, `BendingEnergy`, `Snaps`,
+`SnapSpeed`), a feasible parametrization (`Parametrization`), multi-start optimization
+(`optimize`, Levenberg-Marquardt or optax), results that save and reload
+(`DesignResult.save` / `.load`), differentiable critical angles (`critical_angles`) and the
+design studies (`snap_angle_study`, ...). float64 must be enabled by the caller.
+"""
+
+from ._critical import Critical as Critical
+from ._critical import critical_angles as critical_angles
+from ._critical import design_scene as design_scene
+from ._objectives import AlphaDown as AlphaDown
+from ._objectives import AlphaUp as AlphaUp
+from ._objectives import BendingEnergy as BendingEnergy
+from ._objectives import dynamics_available as dynamics_available
+from ._objectives import energy_released as energy_released
+from ._objectives import FoldHeight as FoldHeight
+from ._objectives import Hysteresis as Hysteresis
+from ._objectives import Snaps as Snaps
+from ._objectives import SnapSpeed as SnapSpeed
+from ._objectives import Term as Term
+from ._optimize import DesignResult as DesignResult
+from ._optimize import MultiStartResult as MultiStartResult
+from ._optimize import optimize as optimize
+from ._optimize import Problem as Problem
+from ._optimize import STATUS as STATUS
+from ._params import Parametrization as Parametrization
+from ._studies import actuator_study as actuator_study
+from ._studies import fastest_snap_study as fastest_snap_study
+from ._studies import snap_angle_study as snap_angle_study
+from ._studies import snap_speed_study as snap_speed_study
+from ._studies import StudyResult as StudyResult
+from ._studies import verify_snap_angles as verify_snap_angles

@@ -1,0 +1,222 @@
+r"""Design objectives: each term maps a design $(\Psi_0, G, s_0)$ to a value, compared with a
+target within a tolerance.
+
+A term contributes the residual $r = \sqrt{w}\,(v - v^\*)/\mathrm{tol}$; the objective is
+$\tfrac12\sum r^2$ (a weighted combination of terms is simply a tuple of terms with
+weights $w$). A design *reaches* its targets when $|v - v^\*| \le \mathrm{tol}$ for every term.
+
+Values (angles in degrees, lengths in $L$, energies in $B/L$):
+
+* `AlphaUp`, `AlphaDown`: the critical clamp angles $\alpha_{c,\rm up}$, $\alpha_{c,\rm down}$ of
+  symmetric actuation (MODEL.md; [`design.critical_angles`][] gives their implicit derivatives).
+* `Hysteresis`: the width $\alpha_{c,\rm up} - \alpha_{c,\rm down}$ of the loop.
+* `FoldHeight(state, alpha_deg)`, `BendingEnergy(state, alpha_deg)`: $y(L/2)$ and $E_b$ of the
+  stable up/down equilibrium at clamp angle $\alpha$ (implicit derivatives of
+  `jaxrod.solve_equilibrium`).
+* `EnergyReleased`: $E_b$ just before the snap minus $E_b$ of the state it lands in (snap up
+  or down); reported, but its derivative needs the critical state's sensitivity, which is
+  not implemented: it is refused as an optimization term.
+* `Snaps(direction, snaps)`: a constraint (snap or no snap on that path), no residual;
+  an iterate that violates it counts as infeasible (infinite objective) and is rejected.
+* `SnapSpeed`: the snapping speed $v_s/v^*$ needs the dynamics API (issue 4); until
+  `jaxrod` provides it, constructing the term raises `NotImplementedError`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+import jaxrod as jr
+
+from ._critical import critical_angles, design_scene
+
+
+class Term(eqx.Module):
+    """Base class: `name`, `target`, `tol`, `weight`, `unit`; `value(ctx)` in traced code."""
+
+    target: float = eqx.field(static=True)
+    tol: float = eqx.field(static=True)
+    weight: float = eqx.field(static=True)
+
+    name = "term"
+    unit = ""
+    is_constraint = False
+
+    def value(self, ctx):
+        raise NotImplementedError
+
+    def describe(self):
+        return {"name": self.name, "target": self.target, "tol": self.tol, "weight": self.weight,
+                "unit": self.unit}
+
+
+def _check(target, tol, weight):
+    for nm, v in (("target", target), ("tol", tol), ("weight", weight)):
+        if not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ValueError(f"{nm}: must be a finite number, got {v!r}")
+    if tol <= 0:
+        raise ValueError(f"tol: must be > 0, got {tol}")
+    if weight <= 0:
+        raise ValueError(f"weight: must be > 0, got {weight}")
+
+
+class AlphaUp(Term):
+    name = "alpha_c_up"
+    unit = "deg"
+
+    def __init__(self, target, tol=0.1, weight=1.0):
+        _check(target, tol, weight)
+        self.target, self.tol, self.weight = float(target), float(tol), float(weight)
+
+    def value(self, ctx):
+        return jnp.rad2deg(ctx.critical.alpha_up)
+
+
+class AlphaDown(AlphaUp):
+    name = "alpha_c_down"
+
+    def value(self, ctx):
+        return jnp.rad2deg(ctx.critical.alpha_down)
+
+
+class Hysteresis(AlphaUp):
+    name = "hysteresis_width"
+
+    def value(self, ctx):
+        c = ctx.critical
+        return jnp.rad2deg(c.alpha_up - c.alpha_down)
+
+
+def _state_name(state):
+    if state not in ("up", "down"):
+        raise ValueError(f"state: must be 'up' or 'down', got {state!r}")
+    return state
+
+
+class FoldHeight(Term):
+    name = "fold_height"
+    unit = "L"
+    state: str = eqx.field(static=True)
+    alpha_deg: float = eqx.field(static=True)
+
+    def __init__(self, target, state="down", alpha_deg=0.0, tol=1e-4, weight=1.0):
+        _check(target, tol, weight)
+        self.state = _state_name(state)
+        self.alpha_deg = float(alpha_deg)
+        self.target, self.tol, self.weight = float(target), float(tol), float(weight)
+
+    def value(self, ctx):
+        return jr.fold_height(ctx.equilibrium(self.state, self.alpha_deg))
+
+    def describe(self):
+        return {**super().describe(), "state": self.state, "alpha_deg": self.alpha_deg}
+
+
+class BendingEnergy(FoldHeight):
+    name = "bending_energy"
+    unit = "B/L"
+
+    def value(self, ctx):
+        return jr.bending_energy(ctx.equilibrium(self.state, self.alpha_deg))
+
+
+class Snaps(Term):
+    """Constraint: the `direction` ('up' or 'down') path snaps (`snaps=True`) or does not."""
+
+    name = "snaps"
+    is_constraint = True
+    direction: str = eqx.field(static=True)
+    snaps: bool = eqx.field(static=True)
+
+    def __init__(self, direction="up", snaps=True):
+        self.direction = _state_name(direction)
+        self.snaps = bool(snaps)
+        self.target, self.tol, self.weight = float(self.snaps), 0.5, 1.0
+
+    def value(self, ctx):
+        c = ctx.critical
+        return (c.snaps_up if self.direction == "up" else c.snaps_down).astype(jnp.result_type(float))
+
+    def describe(self):
+        return {**super().describe(), "name": f"snaps_{self.direction}"}
+
+
+def dynamics_available():
+    """Whether the installed jaxrod exports the snap-dynamics API (issue 4)."""
+    return hasattr(jr, "snap_speed")
+
+
+class SnapSpeed(Term):
+    name = "snap_speed"
+    unit = "v*"
+
+    def __init__(self, target, tol=0.1, weight=1.0):
+        if not dynamics_available():
+            raise NotImplementedError("snap_speed: the snapping-speed objective needs jaxrod's dynamics API "
+                                      "(jaxrod.snap_speed), which is not available yet")
+        _check(target, tol, weight)
+        self.target, self.tol, self.weight = float(target), float(tol), float(weight)
+
+    def value(self, ctx):  # pragma: no cover - enabled when the dynamics API lands
+        return jr.snap_speed(ctx.scene)
+
+
+class Context:
+    """Lazily computed observables of one design (inside traced code): the critical angles
+    and stable equilibria are computed once and shared by all terms."""
+
+    def __init__(self, psi0, gap, s0, n):
+        self.psi0, self.gap, self.s0, self.n = psi0, gap, s0, n
+        self.scene = design_scene(psi0, gap, s0, n)
+        self._critical = None
+        self._eq = {}
+
+    @property
+    def critical(self):
+        if self._critical is None:
+            self._critical = critical_angles(self.psi0, self.gap, self.s0, self.n)
+        return self._critical
+
+    def equilibrium(self, state, alpha_deg):
+        key = (state, alpha_deg)
+        if key not in self._eq:
+            sc = jr.SymmetricAlpha().set(self.scene, jnp.deg2rad(alpha_deg))
+            start = jr.initial_state(jax.lax.stop_gradient(sc), state)
+            eq = jr.solve_equilibrium(sc, start.theta, start.force)
+            ok = (start.result == jr.RESULTS.successful) & (eq.result == jr.RESULTS.successful)
+            # a missing state makes every observable NaN (an infeasible design), never a wrong state
+            nan_theta = jnp.where(ok, eq.theta, jnp.nan)
+            self._eq[key] = eqx.tree_at(lambda e: e.theta, eq, nan_theta)
+        return self._eq[key]
+
+
+def evaluate_terms(terms, psi0, gap, s0, n):
+    """(residuals, values) of `terms` at one design. Constraint terms have no residual; a
+    violated constraint makes every residual NaN (infeasible design)."""
+    ctx = Context(psi0, gap, s0, n)
+    values = jnp.stack([t.value(ctx) for t in terms])
+    res = [math.sqrt(t.weight) * (v - t.target) / t.tol for t, v in zip(terms, values) if not t.is_constraint]
+    res = jnp.stack(res) if res else jnp.zeros((0,), values.dtype)
+    ok = jnp.ones((), bool)
+    for t, v in zip(terms, values):
+        if t.is_constraint:
+            ok = ok & (v == t.target)
+    res = jnp.where(ok, res, jnp.nan)
+    return res, values
+
+
+def energy_released(psi0, gap, s0, n=100, direction="up"):
+    r"""Bending energy released by the snap on the `direction` path (B/L):
+    $E_b(\theta_{\rm before}) - E_b(\theta_{\rm after})$ at $\alpha_c$ (NaN if it does not snap).
+    Not differentiable (see the module docstring)."""
+    sc = design_scene(psi0, gap, s0, n)
+    r = jr.snap_angles(sc)
+    p = r.up if _state_name(direction) == "up" else r.down
+    at = jr.SymmetricAlpha().set(sc, p.alpha_c)
+    eb = lambda th, mu: jr.bending_energy(jr.Equilibrium(th, mu, jr.RESULTS.successful,  # noqa: E731
+                                                         jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), at))
+    return eb(p.theta_before, p.force_before) - eb(p.theta_after, p.force_after)

@@ -1,0 +1,181 @@
+"""Inverse design (`design/`): parametrization, objectives, optimizer, results, gradients.
+
+Fast tests use fold-height objectives (one Newton solve per evaluation); the critical-angle
+checks compile `jaxrod.snap_angles` and its sensitivity (about a minute each) and are
+marked slow (`pytest -m slow tests/test_design.py`)."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import design as ds
+import jaxrod as jr
+from helpers import central_difference
+
+
+# --- parametrization ------------------------------------------------------------------
+
+def test_parametrization_maps_into_bounds_and_back():
+    p = ds.Parametrization(free=("psi0_deg", "gap", "s0"), bounds={"gap": (0.3, 0.9)})
+    z = jnp.array([-40.0, 40.0, 0.0])
+    v = np.asarray(p.values(z))
+    assert 10.0 <= v[0] < 10.0 + 1e-9 and 0.9 - 1e-9 < v[1] <= 0.9 and 0.005 < v[2] < 0.1
+    z2 = p.from_values(psi0_deg=73.0, gap=0.45, s0=0.03)
+    np.testing.assert_allclose(np.asarray(p.values(z2)), [73.0, 0.45, 0.03], rtol=1e-12)
+    zs = p.sample(jax.random.PRNGKey(0), 256)
+    vs = np.asarray(jax.vmap(p.values)(zs))
+    assert np.all(vs[:, 1] > 0.3) and np.all(vs[:, 1] < 0.9)
+    assert p.to_design(z2)[0] == pytest.approx(math.radians(73.0), rel=1e-12)
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    (dict(bounds={"gap": (0.3, 1.2)}), "gap"),
+    (dict(bounds={"psi0_deg": (-1.0, 90.0)}), "psi0_deg"),
+    (dict(bounds={"s0": (0.0, 0.1)}), "s0"),
+    (dict(bounds={"gap": (0.6, 0.3)}), "gap"),
+    (dict(bounds={"gap": (float("nan"), 0.3)}), "gap"),
+    (dict(free=("alpha",)), "free"),
+    (dict(free=("gap",), fixed={"psi0_deg": 200.0}), "psi0_deg"),
+])
+def test_bad_parametrization_names_the_parameter(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        ds.Parametrization(**kwargs)
+
+
+def test_bad_terms_and_optimizer_inputs():
+    with pytest.raises(ValueError, match="tol"):
+        ds.AlphaUp(60.0, tol=0.0)
+    with pytest.raises(ValueError, match="target"):
+        ds.AlphaUp(float("nan"))
+    with pytest.raises(ValueError, match="state"):
+        ds.FoldHeight(0.1, state="sideways")
+    with pytest.raises(ValueError, match="n"):
+        ds.optimize((ds.FoldHeight(-0.2),), ds.Parametrization(free=("gap",)), n=15)
+    with pytest.raises(ValueError, match="z0"):
+        ds.optimize((ds.FoldHeight(-0.2),), ds.Parametrization(free=("gap",)), jnp.zeros((2, 3)), n=16)
+    with pytest.raises(ValueError, match="terms"):
+        ds.optimize((), ds.Parametrization(free=("gap",)), n=16)
+
+
+def test_snap_speed_refused_until_dynamics_exist():
+    if ds.dynamics_available():
+        pytest.skip("dynamics API present")
+    with pytest.raises(NotImplementedError, match="dynamics"):
+        ds.SnapSpeed(20.0)
+    for study in (ds.fastest_snap_study, ds.snap_speed_study, ds.actuator_study):
+        with pytest.raises(NotImplementedError, match="dynamics"):
+            study()
+
+
+# --- fold-height design (fast) ---------------------------------------------------------
+
+N = 24
+PARAM = ds.Parametrization(free=("psi0_deg", "gap"))
+TERMS = (ds.FoldHeight(-0.22, state="down", tol=1e-4), ds.BendingEnergy(40.0, state="down", tol=1e-2))
+
+
+@pytest.fixture(scope="module")
+def problem():
+    return ds.Problem(TERMS, PARAM, N)
+
+
+def test_fold_height_gradient_matches_central_difference(problem):
+    z = PARAM.from_values(psi0_deg=70.0, gap=0.5)
+    r, J, v = problem.linearize(z)
+    Jfd = central_difference(lambda zz: problem.residuals(zz)[0], z)
+    assert np.all(np.isfinite(np.asarray(r)))
+    np.testing.assert_allclose(np.asarray(J), np.asarray(Jfd), rtol=1e-6, atol=1e-6 * float(jnp.max(jnp.abs(Jfd))))
+
+
+@pytest.fixture(scope="module")
+def multistart():
+    z0 = jnp.stack([PARAM.from_values(psi0_deg=70.0, gap=0.5), PARAM.from_values(psi0_deg=100.0, gap=0.4),
+                    PARAM.from_values(psi0_deg=50.0, gap=0.6)])
+    return z0, ds.optimize(TERMS, PARAM, z0, n=N, max_iter=25, progress=False)
+
+
+def test_multistart_reaches_target_checked_at_finer_mesh(multistart):
+    _, res = multistart
+    b = res.best
+    assert bool(b.reached), b.message
+    assert res.num_reached >= 1
+    # independent check: a fresh initial_state (homotopy + Newton, no design code); the
+    # check at a finer mesh is done for the snap-angle study (slow test below)
+    sc = jr.make_scene(b.psi0_deg, b.gap, 0.0, s0=b.s0, n=N)
+    eq = jr.initial_state(sc, "down")
+    assert abs(float(jr.fold_height(eq)) + 0.22) <= 1e-4
+    assert abs(float(jr.bending_energy(eq)) - 40.0) <= 1e-2
+
+
+def test_multistart_under_vmap_equals_loop(multistart):
+    z0, res = multistart
+    for i in range(z0.shape[0]):
+        one = ds.optimize(TERMS, PARAM, z0[i], n=N, max_iter=25, progress=False)
+        np.testing.assert_allclose(np.asarray(one.values[0]), np.asarray(res.values[i]), rtol=1e-10, atol=1e-12)
+        assert bool(one.reached[0]) == bool(res.reached[i])
+
+
+def test_result_save_and_load_roundtrip(multistart, tmp_path):
+    _, res = multistart
+    path = str(tmp_path / "best")
+    res.best.save(path)
+    back = ds.DesignResult.load(path)
+    assert back.to_dict() == res.best.to_dict()
+    np.testing.assert_array_equal(np.asarray(back.history_loss), np.asarray(res.best.history_loss))
+    assert back.names == res.best.names
+
+
+def test_unreachable_target_reports_best_and_not_reached():
+    # the down state's fold height cannot exceed 0 (it would be the up state)
+    res = ds.optimize((ds.FoldHeight(+0.3, state="down", tol=1e-4),), PARAM, n=N, max_iter=8, progress=False)
+    b = res.best
+    assert not bool(b.reached) and res.num_reached == 0
+    assert b.message.startswith("target not reached") and "fold_height" in b.message
+    assert b.history_loss[-1] <= b.history_loss[0]
+
+
+def test_optax_optimizer_decreases_the_objective():
+    optax = pytest.importorskip("optax")
+    res = ds.optimize((ds.FoldHeight(-0.22, state="down", tol=1e-4),), PARAM, n=N, optimizer=optax.adam(0.05),
+                      max_iter=6, progress=False)
+    h = np.asarray(res.best.history_loss)
+    assert h[-1] < h[0]
+
+
+# --- critical angles (slow: compiles snap_angles and the sensitivity) -------------------
+
+@pytest.mark.slow
+def test_critical_angle_gradients_match_central_difference():
+    n = 40
+
+    def f(p):
+        c = ds.critical_angles(p[0], p[1], p[2], n)
+        return jnp.stack([c.alpha_up, c.alpha_down])
+
+    p = jnp.array([math.radians(60.0), 0.5, 0.02])
+    kinds = ds.critical_angles(p[0], p[1], p[2], n)
+    assert int(kinds.kind_up) == 2 and int(kinds.kind_down) == 1  # both formulas exercised
+    J = jax.jacfwd(f)(p)
+    Jr = jax.jacrev(f)(p)
+    Jfd = central_difference(f, p)
+    scale = float(jnp.max(jnp.abs(Jfd)))
+    np.testing.assert_allclose(np.asarray(J), np.asarray(Jfd), atol=1e-6 * scale)
+    np.testing.assert_allclose(np.asarray(Jr), np.asarray(J), atol=1e-12 * scale)
+
+
+@pytest.mark.slow
+def test_study_a_reaches_targets_at_finer_mesh():
+    res = ds.snap_angle_study(60.0, -70.0, starts=2, n_coarse=40, n=160, n_check=320, progress=False)
+    assert bool(res.design.reached), res.design.message
+    assert res.verification.reached, res.verification
+    assert max(res.verification.errors_deg) <= 0.1
+
+
+@pytest.mark.slow
+def test_unreachable_snap_angle_gives_clear_message():
+    res = ds.optimize((ds.AlphaUp(150.0),), ds.Parametrization(), n=40, max_iter=15, progress=False)
+    assert not bool(res.best.reached) and res.num_reached == 0
+    assert "target not reached" in res.best.message and "alpha_c_up" in res.best.message
