@@ -120,6 +120,13 @@ def kinematics(theta, omega, d):
     return x, v
 
 
+def safe_norm(v):
+    """|v| along the last axis with a finite gradient at v = 0 (double-where)."""
+    s2 = jnp.sum(v**2, -1)
+    pos = s2 > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, s2, 1.0)), 0.0)
+
+
 def potential_energy(theta, scene, d):
     """$E_b$ (the statics' function) plus gravity on the free nodes."""
     e = bending_energy(theta, scene, d)
@@ -134,13 +141,27 @@ def kinetic_energy(theta, omega, d):
     return 0.5 * jnp.sum(d.node_mass[1:-1] * jnp.sum(v[1:-1] ** 2, -1))
 
 
-def accelerations(t, y, scene, protocol, dissipation, baumgarte):
-    r"""$\ddot\theta(t,\theta,\dot\theta)$, see the module docstring."""
+def _bending_grads(theta, aL, aR, scene, d):
+    """dE_b/dtheta (N,), dE_b/dalpha_L, dE_b/dalpha_R in one reverse pass."""
+
+    def E(th, a_l, a_r):
+        return bending_energy(th, scene, d._replace(theta_left=a_l, theta_right=-a_r))
+
+    return jax.grad(E, argnums=(0, 1, 2))(theta, aL, aR)
+
+
+def accelerations(t, y, scene, protocol, dissipation, baumgarte, d=None, with_work=False):
+    r"""$\ddot\theta(t,\theta,\dot\theta)$, see the module docstring. With `with_work`, also
+    the power of the clamps $\partial_{\alpha_L}V\,\dot\alpha_L+\partial_{\alpha_R}V\,\dot\alpha_R$.
+    `d`: `discretize(scene)`, reused across calls (only the clamp angles change with t)."""
     theta, omega = y[0], y[1]
     aL, aR, rL, rR = protocol.angles(t)
-    sc = scene_at(scene, aL, aR)
-    d = discretize(sc)
-    Q = -jax.grad(bending_energy)(theta, sc, d)
+    sc = scene
+    if d is None:
+        d = discretize(scene)
+    d = d._replace(theta_left=jnp.asarray(aL, theta.dtype), theta_right=-jnp.asarray(aR, theta.dtype))
+    gE, gL, gR = _bending_grads(theta, d.theta_left, -d.theta_right, scene, d)
+    Q = -gE
     eta = dissipation.viscosity
     full_rate = jnp.concatenate([rL[None], omega, -rR[None]])
     # Rayleigh dissipation: dR/d(omega_i) with phi_k-dot = diff(full_rate)
@@ -158,7 +179,7 @@ def accelerations(t, y, scene, protocol, dissipation, baumgarte):
     if sc.gravity is not None:
         f = f.at[:, 1].add(-m * sc.gravity.g)
     f = f - dissipation.damping * m[:, None] * v
-    speed = jnp.sqrt(jnp.sum(v**2, -1) + jnp.finfo(v.dtype).tiny)
+    speed = safe_norm(v)
     f = f - dissipation.drag * (m / lam)[:, None] * speed[:, None] * v
     invm = jnp.concatenate([jnp.zeros(1, m.dtype), 1.0 / m[1:-1], jnp.zeros(1, m.dtype)])
     # prescribed accelerations of the end nodes (node N: Baumgarte-stabilized end condition)
@@ -173,7 +194,10 @@ def accelerations(t, y, scene, protocol, dissipation, baumgarte):
     T = lax.linalg.tridiagonal_solve(lower, diag, upper, rhs[:, None])[:, 0]
     F_t = jnp.zeros_like(x).at[:-1].add(T[:, None] * tt).at[1:].add(-T[:, None] * tt)
     a = b + invm[:, None] * F_t
-    return jnp.sum(nn * (a[1:] - a[:-1]), -1) / d.h
+    acc = jnp.sum(nn * (a[1:] - a[:-1]), -1) / d.h
+    if with_work:
+        return acc, gL * rL + gR * rR
+    return acc
 
 
 def vector_field(t, y, args):
@@ -182,16 +206,18 @@ def vector_field(t, y, args):
     return jnp.stack([y[1], accelerations(t, y, scene, protocol, dissipation, baumgarte)])
 
 
-def observables(t, y, scene, protocol):
+def observables(t, y, scene, protocol, d=None):
     """Fold height, fold speed |dx/dt| at s = L/2, bending and kinetic energy, max node speed,
     end-constraint error."""
     theta, omega = y[0], y[1]
     aL, aR, _, _ = protocol.angles(t)
     sc = scene_at(scene, aL, aR)
-    d = discretize(sc)
+    if d is None:
+        d = discretize(sc)
+    d = d._replace(theta_left=jnp.asarray(aL, theta.dtype), theta_right=-jnp.asarray(aR, theta.dtype))
     x, v = kinematics(theta, omega, d)
     k = sc.mesh.n // 2
-    speed = jnp.sqrt(jnp.sum(v**2, -1))
+    speed = safe_norm(v)
     target = jnp.stack([sc.clamps.gap, jnp.zeros((), x.dtype)])
     return dict(
         fold_height=x[k, 1],
@@ -200,7 +226,7 @@ def observables(t, y, scene, protocol):
         bending=bending_energy(theta, sc, d),
         potential=potential_energy(theta, sc, d),
         kinetic=kinetic_energy(theta, omega, d),
-        constraint=jnp.sqrt(jnp.sum((x[-1] - target) ** 2)),
+        constraint=safe_norm(x[-1] - target),
         speed=speed,
         positions=x,
     )

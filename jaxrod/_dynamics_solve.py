@@ -28,7 +28,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._dynamics import Dissipation, Protocol, accelerations, check_scene, observables, scene_at
+from ._dynamics import Dissipation, Protocol, accelerations, check_scene, observables
 from ._energy.geometry import discretize
 
 
@@ -77,20 +77,10 @@ class Trajectory(eqx.Module):
 
 
 def _field(t, y, args):
-    scene, protocol, dissipation, baumgarte = args
+    scene, protocol, dissipation, baumgarte, d = args
     q, _ = y
-    acc = accelerations(t, q, scene, protocol, dissipation, baumgarte)
-    # clamp work rate: dV/dalpha_L * rate_L + dV/dalpha_R * rate_R
-    aL, aR, rL, rR = protocol.angles(t)
-
-    def V(a):
-        from ._dynamics import potential_energy
-
-        sc = scene_at(scene, a[0], a[1])
-        return potential_energy(q[0], sc, discretize(sc))
-
-    gL, gR = jax.grad(V)(jnp.stack([aL, aR]))
-    return jnp.stack([q[1], acc]), gL * rL + gR * rR
+    acc, power = accelerations(t, q, scene, protocol, dissipation, baumgarte, d, with_work=True)
+    return jnp.stack([q[1], acc]), power
 
 
 def _refine_peak(t, f):
@@ -133,27 +123,32 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     theta0 = jnp.asarray(theta0)
     omega0 = jnp.zeros_like(theta0) if omega0 is None else jnp.asarray(omega0, dtype)
     y0 = (jnp.stack([theta0, omega0]), jnp.zeros((), dtype))
-    args = (scene, protocol, dissipation, jnp.asarray(baumgarte, dtype))
+    d = discretize(scene)
+    args = (scene, protocol, dissipation, jnp.asarray(baumgarte, dtype), d)
     ts = jnp.linspace(0.0, t1, n_fine)
     if frame_window is None:
         frame_window = (0.0, t1)
     tf = jnp.linspace(jnp.asarray(frame_window[0], dtype), jnp.asarray(frame_window[1], dtype), n_frames)
 
     def obs(t, y, a):
-        o = observables(t, y[0], scene, protocol)
+        o = observables(t, y[0], scene, protocol, d)
         return dict(fold_height=o["fold_height"], fold_speed=o["fold_speed"], vy=o["fold_velocity"][1],
                     bending=o["bending"], potential=o["potential"], kinetic=o["kinetic"],
                     constraint=o["constraint"], work=y[1])
 
     def frames(t, y, a):
-        o = observables(t, y[0], scene, protocol)
+        o = observables(t, y[0], scene, protocol, d)
         return dict(theta=y[0][0], positions=o["positions"], speed=o["speed"])
 
     saveat = dfx.SaveAt(subs=[dfx.SubSaveAt(ts=ts, fn=obs), dfx.SubSaveAt(ts=tf, fn=frames)])
 
+    k = scene.mesh.n // 2
+
     def done(t, y, a, **kw):
-        o = observables(t, y[0], scene, protocol)
-        return (direction * o["fold_height"] > 0.0) & (direction * o["fold_velocity"][1] < 0.0)
+        th, om = y[0][0][:k], y[0][1][:k]
+        fh = jnp.sum(d.h[:k] * jnp.sin(th))
+        vy = jnp.sum(d.h[:k] * jnp.cos(th) * om)
+        return (direction * fh > 0.0) & (direction * vy < 0.0)
 
     event = dfx.Event(done) if stop_at_snap else None
     if dt is None:

@@ -27,7 +27,9 @@ def snap30():
 def brink_run(snap30):
     sc, snap = snap30
     start = jr.brink(sc, "up", snap=snap, nudge=0.05)
-    runs = {tol: jr.simulate(start.scene, start.theta0, start.protocol, direction=1.0, t1=3.0, rtol=tol, atol=tol)
+    # tolerances as arrays: one compilation for all three (Python floats would be static)
+    runs = {tol: jr.simulate(start.scene, start.theta0, start.protocol, direction=1.0, t1=3.0,
+                             rtol=jnp.asarray(tol), atol=jnp.asarray(tol))
             for tol in (1e-4, 1e-6, 1e-8)}
     return start, runs
 
@@ -89,8 +91,9 @@ def test_energy_trade_at_snap(brink_run):
 def test_damping_dissipates(snap30):
     sc, snap = snap30
     start = jr.brink(sc, "up", snap=snap, nudge=0.05)
-    free = jr.simulate(start.scene, start.theta0, start.protocol, t1=3.0, rtol=1e-6, atol=1e-6)
-    damped = jr.simulate(start.scene, start.theta0, start.protocol, t1=3.0, rtol=1e-6, atol=1e-6,
+    tol = jnp.asarray(1e-6)
+    free = jr.simulate(start.scene, start.theta0, start.protocol, direction=1.0, t1=3.0, rtol=tol, atol=tol)
+    damped = jr.simulate(start.scene, start.theta0, start.protocol, direction=1.0, t1=3.0, rtol=tol, atol=tol,
                          dissipation=jr.Dissipation(damping=2.0))
     assert float(damped.v_s) < float(free.v_s)
     assert math.isnan(float(damped.energy_drift))

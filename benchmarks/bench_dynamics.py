@@ -1,0 +1,132 @@
+#!/usr/bin/env python
+"""Dynamics benchmark: the brink snap (Psi0 = 30 deg, G/L = 0.5, s0 = 0.02, nudge 0.05 rad
+along the unstable mode, clamps 1e-3 rad past alpha_c) per N, solver and tolerance.
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_dynamics.py [--quick] [--ns 50,100,200]
+
+For each N: a reference v_s from Tsit5 at rtol = atol = 1e-10; then each (solver, tol):
+wall time of the compiled run (median of `--repeats`, `block_until_ready`), compile time,
+accepted+rejected steps, |v_s - v_ref| / v_ref, energy drift. Writes
+benchmarks/results/dynamics.json, dynamics.md and dynamics.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+
+import jaxrod as jr  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results"
+
+
+def run(start, solver, tol, repeats):
+    kw = dict(direction=start.direction, t1=3.0, solver=solver, rtol=tol, atol=tol)
+    t0 = time.perf_counter()
+    tr = jr.simulate(start.scene, start.theta0, start.protocol, **kw)
+    jax.block_until_ready(tr.v_s)
+    first = time.perf_counter() - t0
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        tr = jr.simulate(start.scene, start.theta0, start.protocol, **kw)
+        jax.block_until_ready(tr.v_s)
+        times.append(time.perf_counter() - t0)
+    wall = float(np.median(times))
+    return tr, wall, first - wall
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="N = 50 only, Tsit5 only")
+    ap.add_argument("--ns", default="50,100,200")
+    ap.add_argument("--repeats", type=int, default=2)
+    args = ap.parse_args()
+    ns = [50] if args.quick else [int(x) for x in args.ns.split(",")]
+    cases = [("tsit5", 1e-4), ("tsit5", 1e-6), ("tsit5", 1e-8), ("dopri8", 1e-6)]
+    if not args.quick:
+        cases += [("kvaerno5", 1e-4)]
+    rows = []
+    for n in ns:
+        sc = jr.make_scene(30, 0.5, 0, n=n)
+        start = jr.brink(sc, "up", nudge=0.05)
+        ref, wref, _ = run(start, "tsit5", 1e-10, 1)
+        vref = float(ref.v_s)
+        print(f"N={n} reference v_s = {vref:.8f} ({int(ref.num_steps)} steps, {wref:.2f} s)", flush=True)
+        for solver, tol in cases:
+            if solver.startswith("kvaerno") and n > 50:
+                continue  # dense-Jacobian Newton: minutes per run beyond N = 50
+            tr, wall, comp = run(start, solver, tol, args.repeats)
+            row = dict(n=n, solver=solver, tol=tol, wall_s=wall, compile_s=comp, steps=int(tr.num_steps),
+                       v_s=float(tr.v_s), v_ref=vref, rel_err=abs(float(tr.v_s) - vref) / vref,
+                       t_cross=float(tr.t_cross), energy_drift=float(tr.energy_drift),
+                       us_per_step=1e6 * wall / max(int(tr.num_steps), 1))
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    # sensitivity of v_s to the nudge (brink) and to the clamp rate (ramp), N = 50, Tsit5 1e-8
+    sens = []
+    sc = jr.make_scene(30, 0.5, 0, n=50)
+    snap = jr.snap_angles(sc)
+    for nudge in (0.01, 0.05, 0.2):
+        st, tr = jr.snap_dynamics(sc, "up", kind="brink", nudge=nudge, snap=snap, rtol=1e-8, atol=1e-8, t1=4.0)
+        sens.append(dict(scene="brink", nudge=nudge, v_s=float(tr.v_s), t_cross=float(tr.t_cross),
+                         steps=int(tr.num_steps)))
+        print(json.dumps(sens[-1]), flush=True)
+    for rate in (0.1, 0.3, 1.0):
+        st, tr = jr.snap_dynamics(sc, "up", kind="ramp", rate=rate, snap=snap, rtol=1e-8, atol=1e-8, t1=8.0)
+        sens.append(dict(scene="ramp", rate=rate, v_s=float(tr.v_s), t_cross=float(tr.t_cross),
+                         steps=int(tr.num_steps)))
+        print(json.dumps(sens[-1]), flush=True)
+    info = dict(date=datetime.datetime.now().isoformat(timespec="seconds"), machine=platform.machine(),
+                processor=platform.processor(), python=platform.python_version(), jax=jax.__version__,
+                cpus=os.cpu_count(), openblas_threads=os.environ.get("OPENBLAS_NUM_THREADS"),
+                note="2-core VM shared with other JAX jobs while measured: wall times are upper bounds")
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / "dynamics.json").write_text(json.dumps(dict(info=info, scene=dict(psi0_deg=30, gap=0.5, s0=0.02,
+                                                                                 nudge=0.05, past=1e-3), rows=rows,
+                                                      sensitivity=sens),
+                                                      indent=1))
+    lines = ["| N | solver | rtol=atol | wall (s) | steps | us/step | v_s / v* | rel. error vs ref | energy drift |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['n']} | {r['solver']} | {r['tol']:.0e} | {r['wall_s']:.3f} | {r['steps']} | "
+                     f"{r['us_per_step']:.1f} | {r['v_s']:.6f} | {r['rel_err']:.1e} | {r['energy_drift']:.1e} |")
+    lines += ["", "Sensitivity (N = 50, Tsit5 rtol = atol = 1e-8; ramp from alpha_c - 2 deg at rate rad/T):", "",
+              "| scene | nudge (rad) / rate (rad/T) | v_s / v* | t_cross (T) | steps |", "|---|---|---|---|---|"]
+    for r in sens:
+        lines.append(f"| {r['scene']} | {r.get('nudge', r.get('rate'))} | {r['v_s']:.5f} | {r['t_cross']:.4f} | "
+                     f"{r['steps']} |")
+    (RESULTS / "dynamics.md").write_text(f"# Brink snap benchmark ({info['date']}, {info['cpus']} CPUs)\n\n"
+                                         + "\n".join(lines) + "\n")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 4))
+    for (n, s), mk in zip(sorted({(r["n"], r["solver"]) for r in rows}), "osd^v<>p*h"):
+        rr = [r for r in rows if r["n"] == n and r["solver"] == s]
+        ax.loglog([r["wall_s"] for r in rr], [max(r["rel_err"], 1e-16) for r in rr], mk + "-", label=f"{s}, N={n}")
+    ax.set_xlabel("wall time after compile (s)")
+    ax.set_ylabel("|v_s - v_ref| / v_ref")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(RESULTS / "dynamics.png", dpi=120)
+
+
+if __name__ == "__main__":
+    main()
