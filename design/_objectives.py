@@ -146,7 +146,9 @@ class Snaps(Term):
 
 
 def dynamics_available():
-    """Whether the installed jaxrod exports the snap-dynamics API (issue 4)."""
+    """Whether design can use a snap-speed objective: needs `jaxrod.snap_speed`, a
+    differentiable v_s of a design. (`jaxrod.snap_dynamics` exists since issue 4 but is not
+    yet wired into design: the speed objectives and studies (b)-(d) still refuse.)"""
     return hasattr(jr, "snap_speed")
 
 
@@ -156,8 +158,11 @@ class SnapSpeed(Term):
 
     def __init__(self, target, tol=0.1, weight=1.0):
         if not dynamics_available():
-            raise NotImplementedError("snap_speed: the snapping-speed objective needs jaxrod's dynamics API "
-                                      "(jaxrod.snap_speed), which is not available yet")
+            raise NotImplementedError("snap_speed: the snapping-speed objective needs a differentiable v_s from "
+                                      "jaxrod's dynamics; jaxrod.snap_dynamics exists but is not wired into "
+                                      "design yet" if hasattr(jr, "snap_dynamics") else
+                                      "snap_speed: the snapping-speed objective needs jaxrod's dynamics API, "
+                                      "which is not available yet")
         _check(target, tol, weight)
         self.target, self.tol, self.weight = float(target), float(tol), float(weight)
 

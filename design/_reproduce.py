@@ -118,7 +118,7 @@ def section_master_curves(cache, n, out, progress, quick=False):
                      f"up {last_up}, down {last_dn}", ""))
         if p == 180.0:
             sym = max(abs(u + d) for u, d in zip(up, dn) if u is not None and d is not None)
-            rows.append(("flat strip symmetric: max |alpha_up + alpha_down|", "0", f"{sym:.2e} deg", ""))
+            rows.append(("flat strip symmetric: max abs(alpha_up + alpha_down)", "0", f"{sym:.2e} deg", ""))
     ax.set_xlabel("G / L")
     ax.set_ylabel("alpha_c (deg): up (solid), down (dashed)")
     ax.axhline(0, color="k", lw=0.5)
@@ -132,12 +132,13 @@ def section_master_curves(cache, n, out, progress, quick=False):
 
 def _dynamics_section(title, paper):
     def section(cache, n, out, progress):
-        import design
+        import jaxrod as jr
 
-        if not design.dynamics_available():
+        if not hasattr(jr, "snap_dynamics"):
             return title, "**not available yet**: needs jaxrod's snap dynamics (issue 4).", [
                 (q, pv, "not available yet", "") for q, pv in paper], None
-        return title, "**not available yet**: the dynamics API exists but this section is not wired yet.", [
+        return title, ("**not available yet** in this report: jaxrod's dynamics (`jaxrod.snap_dynamics`, "
+                       "`jaxrod snap` / speed-plane CLI) exists but is not wired into `reproduce` yet."), [
             (q, pv, "not available yet", "") for q, pv in paper], None
 
     return section

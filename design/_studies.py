@@ -80,8 +80,8 @@ def snap_angle_study(alpha_up_deg=60.0, alpha_down_deg=-70.0, *, bounds=None, s0
 
 def _needs_dynamics(what):
     if not dynamics_available():
-        raise NotImplementedError(f"{what} needs jaxrod's snap dynamics (jaxrod.snap_speed, issue 4), "
-                                  "which is not available yet")
+        raise NotImplementedError(f"{what} needs a differentiable snap speed from jaxrod's dynamics "
+                                  "(issue 4); not available yet in design")
 
 
 def fastest_snap_study(min_gap=0.3, **kwargs):

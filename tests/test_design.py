@@ -179,3 +179,16 @@ def test_unreachable_snap_angle_gives_clear_message():
     res = ds.optimize((ds.AlphaUp(150.0),), ds.Parametrization(), n=40, max_iter=15, progress=False)
     assert not bool(res.best.reached) and res.num_reached == 0
     assert "target not reached" in res.best.message and "alpha_c_up" in res.best.message
+
+
+@pytest.mark.slow
+def test_critical_angle_gradient_agrees_with_snap_angles_own_derivative():
+    # two independent implementations: design's fold / branch-point sensitivity at the
+    # refined critical state, and jaxrod.snap_angles' extended-system implicit derivative
+    n = 40
+    p = jnp.array([math.radians(60.0), 0.5, 0.02])
+    mine = jax.jacfwd(lambda q: ds.critical_angles(q[0], q[1], q[2], n).alpha_up)(p)
+    theirs = jax.grad(lambda q: jr.snap_angles(ds.design_scene(q[0], q[1], q[2], n)).up.alpha_c)(p)
+    if float(jnp.max(jnp.abs(theirs))) == 0.0:
+        pytest.skip("this jaxrod's snap_angles is not differentiable")
+    np.testing.assert_allclose(np.asarray(mine), np.asarray(theirs), atol=1e-7 * float(jnp.max(jnp.abs(mine))))

@@ -1,0 +1,46 @@
+"""`jaxrod design` and `jaxrod reproduce`: one-line errors with exit 2; slow end-to-end runs."""
+
+import json
+
+import pytest
+
+from jaxrod._cli import main
+
+
+@pytest.mark.parametrize("argv, word", [
+    (["design", "--json"], "target"),
+    (["design", "--target-alpha-up", "60", "--bounds", "gap=0.3:1.5"], "gap"),
+    (["design", "--target-alpha-up", "60", "--bounds", "gap=0.3"], "bounds"),
+    (["design", "--target-alpha-up", "60", "--bounds", "alpha=0:1"], "bounds"),
+    (["design", "--target-alpha-up", "nan"], "target-alpha-up"),
+    (["design", "--target-alpha-up", "60", "--tol", "0"], "tol"),
+    (["design", "--target-alpha-up", "60", "--n", "15"], "n"),
+    (["design", "--target-alpha-up", "60", "--starts", "0"], "starts"),
+    (["design", "--target-alpha-up", "60", "--s0", "-1"], "s0"),
+    (["design", "--target-speed", "20"], "target-speed"),
+])
+def test_design_bad_input_is_one_line_exit_2(argv, word, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("jaxrod: error:") and word in err and "Traceback" not in err
+
+
+@pytest.mark.slow
+def test_design_cli_json_reaches_targets(capsys):
+    code = main(["design", "--target-alpha-up", "60", "--target-alpha-down", "-70", "--n", "40",
+                 "--starts", "1", "--json"])
+    rec = json.loads(capsys.readouterr().out)
+    assert code == 0 and rec["reached"] is True
+    assert abs(rec["alpha_c_up"] - 60) <= 0.1 and abs(rec["alpha_c_down"] + 70) <= 0.1
+    assert {"psi0_deg", "gap", "s0", "num_reached", "num_starts"} <= set(rec)
+
+
+@pytest.mark.slow
+def test_reproduce_quick_writes_report(tmp_path, capsys):
+    assert main(["reproduce", "--out", str(tmp_path), "--quick"]) == 0
+    text = (tmp_path / "report.md").read_text()
+    assert "73.6 deg" in text and "-80 deg" in text and "not available yet" in text
+    res = json.loads((tmp_path / "results.json").read_text())
+    rows = res["sections"]["No snap at Psi0 = 30 deg, G/L = 0.8"]["rows"]
+    assert rows[0][2] == "none"
+    assert (tmp_path / "master_curves.png").stat().st_size > 1000
