@@ -48,6 +48,8 @@ from ._stability import stability as stability
 
 from ._critical import critical_point as critical_point
 from ._critical import CriticalPoint as CriticalPoint
+from ._critical import cusp_point as cusp_point
+from ._critical import CuspPoint as CuspPoint
 from ._termination import termination_gap as termination_gap
 from ._termination import TerminationGap as TerminationGap
 
@@ -64,3 +66,9 @@ from ._dynamics_scenes import snap_dynamics as snap_dynamics
 from ._dynamics_scenes import Start as Start
 from ._dynamics_solve import simulate as simulate
 from ._dynamics_solve import Trajectory as Trajectory
+from ._hysteresis import BRANCH_NAMES as HYSTERESIS_BRANCHES
+from ._hysteresis import hysteresis as hysteresis
+from ._hysteresis import Hysteresis as Hysteresis
+from ._phase import phase_diagram as phase_diagram
+from ._plot import plot_hysteresis as plot_hysteresis
+from ._plot import plot_phase_diagram as plot_phase_diagram

@@ -249,3 +249,75 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
     fh = positions(t, m, sc)[N // 2, 1]
     return CriticalPoint(alpha=a, theta=t, force=m, mode=vt / nv, mode_force=vm / nv, fold_height=fh,
                          kind=kind.astype(jnp.int32), residual=r, num_steps=k, result=result)
+
+
+# ----- cusp: where a fold pair meets (two-parameter, alpha and the gap) -----------------
+
+def _set_gap(scene, g):
+    return eqx.tree_at(lambda s: s.clamps.gap, scene, g)
+
+
+def _cusp_residual(z, scene, parameter, ell):
+    N = ell.shape[0]
+    zf, g = z[:-1], z[-1]
+    sc = _set_gap(scene, g)
+    t, m, a, vt, vm = _fold_unpack(zf, N)
+    r = _fold_residual(zf, sc, parameter, ell)
+    # cubic coefficient of the fold's normal form: L'''[v, v, v]
+    d3 = jax.jvp(lambda tt, mm: _hvp(sc, parameter, tt, mm, a, vt, vm), (t, m), (vt, vm))[1]
+    c = jnp.dot(d3[0], vt) + jnp.dot(d3[1], vm)
+    return jnp.concatenate([r, c[None]])
+
+
+class CuspPoint(eqx.Module):
+    r"""A cusp of the fold curve in the (gap, alpha) plane: `gap` $G_c$, `alpha`, the critical
+    state `theta`, `force`, `mode`, `residual`, `num_steps`, `result`."""
+
+    gap: Array
+    alpha: Array
+    theta: Array
+    force: Array
+    mode: Array
+    residual: Array
+    num_steps: Array
+    result: RESULTS
+
+
+@eqx.filter_jit
+def cusp_point(scene, theta, force, alpha, mode, *, parameter: AbstractParameter = SymmetricAlpha(),
+               max_steps: int = 30, tol: float = 1e-12) -> CuspPoint:
+    r"""The cusp where a pair of folds (under `parameter`) meets as the gap varies: Newton on
+    the fold system of `critical_point` augmented by the gap $G$ as unknown and the
+    degeneracy condition $\tilde{\mathcal L}'''[v,v,v]=0$ (the quadratic coefficient of the
+    fold's normal form vanishes), $2N+6$ unknowns. Start from a fold near the cusp (`theta`,
+    `force`, `alpha`, `mode`, at the gap of `scene`). Differentiable (implicit function
+    theorem, as `critical_point`) with respect to the float leaves of `scene` other than the
+    gap, e.g. $dG_c/d\Psi_0$."""
+    dtype = theta.dtype
+    N = theta.shape[0]
+    sg = lax.stop_gradient
+    scene_sg = sg(scene)
+    theta, force, alpha, mode = sg(theta), sg(force), sg(jnp.asarray(alpha, dtype)), sg(mode)
+    w = discretize(scene_sg).h
+    mode = mode / jnp.sqrt(jnp.sum(w * mode**2))
+    ell = w * mode
+    gt0 = _hvp(scene_sg, parameter, theta, force, alpha, mode, jnp.zeros(2, dtype))[0]
+    P = jax.jacfwd(lambda mm: _grad(scene_sg, parameter, theta, mm, alpha)[0])(force)
+    vm0 = -jnp.linalg.lstsq(P, gt0)[0]
+    z0 = jnp.concatenate([_fold_pack(theta, force, alpha, mode, vm0), jnp.asarray(scene_sg.clamps.gap, dtype)[None]])
+
+    def res(z, sc):
+        return _cusp_residual(z, sc, parameter, ell)
+
+    z, k, done = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, 2 * N + 5)
+    finite = jnp.all(jnp.isfinite(z))
+    z_use = jnp.where(finite, z, z0)
+    J = jax.jacfwd(lambda z: res(z, scene_sg))(z_use)
+    J = jnp.where(finite & jnp.all(jnp.isfinite(J)), J, jnp.eye(J.shape[0], dtype=dtype))
+    r = jnp.max(jnp.abs(res(z, scene_sg)))
+    z = jnp.where(finite, _implicit_step(lambda z: res(z, scene), sg(z_use), J), z)
+    t, m, a, vt, vm = _fold_unpack(z[:-1], N)
+    result = RESULTS.where(done & finite, RESULTS.successful,
+                           RESULTS.where(finite, RESULTS.max_steps_reached, RESULTS.nonfinite))
+    return CuspPoint(gap=z[-1], alpha=a, theta=t, force=m, mode=vt / jnp.sqrt(jnp.sum(w * vt**2)),
+                     residual=r, num_steps=k, result=result)

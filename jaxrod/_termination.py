@@ -57,12 +57,14 @@ SMALL_JUMP = 0.15  # |fold height change| / L below which the end is "continuous
 
 
 class TerminationGap(NamedTuple):
-    """`gap_up`, `gap_down` ($G^\\ast/L$; 1.0 where the path never stops snapping, NaN where it
-    never snaps), `bracket_up`/`bracket_down` ($(G^\\ast_-, G^\\ast_+)$), `reason_up`/
+    r"""`gap_up`, `gap_down` ($G^\ast/L$; 1.0 where the path never stops snapping, NaN where it
+    never snaps), `bracket_up`/`bracket_down` ($(G^\ast_-, G^\ast_+)$), `reason_up`/
     `reason_down` (see the module docstring), `kind_up`/`kind_down` (instability kind at
-    $G^\\ast_-$: "fold", "branch_point" or "none"), `alpha_c_up`/`alpha_c_down` (rad, at
-    $G^\\ast_-$), `jump_up`/`jump_down` (fold-height change of the snap at $G^\\ast_-$),
-    `evaluations` (number of `snap_angles` calls)."""
+    $G^\ast_-$: "fold", "branch_point" or "none"), `alpha_c_up`/`alpha_c_down` (rad, at
+    $G^\ast_-$), `jump_up`/`jump_down` (fold-height change of the snap at $G^\ast_-$),
+    `evaluations` (number of `snap_angles` calls); for a path that ends at a cusp,
+    `cusp_gap_*` the exact cusp of the fold pair ([`jaxrod.cusp_point`][], $G_c\ge G^\ast$) and
+    `dcusp_gap_dpsi0_*` $dG_c/d\Psi_0$ (per radian, implicit differentiation); NaN otherwise."""
 
     psi0_deg: float
     gap_up: float
@@ -78,6 +80,10 @@ class TerminationGap(NamedTuple):
     jump_up: float
     jump_down: float
     evaluations: int
+    cusp_gap_up: float = math.nan
+    cusp_gap_down: float = math.nan
+    dcusp_gap_dpsi0_up: float = math.nan
+    dcusp_gap_dpsi0_down: float = math.nan
 
     def to_dict(self):
         def clean(x):
@@ -103,7 +109,8 @@ def _snap_at(base, psi0, gap):
 
     def summary(p):
         return dict(snaps=p.snaps, alpha=p.alpha_c, kind=p.kind,
-                    jump=p.fold_height_after - p.fold_height_before)
+                    jump=p.fold_height_after - p.fold_height_before,
+                    theta=p.theta_before, force=p.force_before, mode=p.mode)
 
     return dict(up=summary(r.up), down=summary(r.down), has_up=has_up, has_down=has_down)
 
@@ -186,8 +193,34 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
             reason = "snap_vanishes"
         results[name] = dict(gap=0.5 * (lo + hi), bracket=(lo, hi), reason=reason, kind=kind,
                              alpha=float(p["alpha"]), jump=jump)
+        if reason == "cusp":
+            results[name].update(_cusp(base, psi, lo, p))
     if bar is not None:
         bar.close()
     u, d = results["up"], results["down"]
+    nan = math.nan
     return TerminationGap(float(psi0_deg), u["gap"], d["gap"], u["bracket"], d["bracket"], u["reason"], d["reason"],
-                          u["kind"], d["kind"], u["alpha"], d["alpha"], u["jump"], d["jump"], count[0])
+                          u["kind"], d["kind"], u["alpha"], d["alpha"], u["jump"], d["jump"], count[0],
+                          u.get("cusp", nan), d.get("cusp", nan), u.get("dcusp", nan), d.get("dcusp", nan))
+
+
+@eqx.filter_jit
+def _cusp_gap(base, psi0, gap, theta, force, alpha, mode):
+    from ._critical import cusp_point
+
+    def g(p):
+        scene = eqx.tree_at(lambda s: (s.strip.psi0, s.clamps.gap), base, (p, gap))
+        cp = cusp_point(scene, theta, force, alpha, mode)
+        return cp.gap, cp.result == RESULTS.successful
+
+    gc, dg, ok = jax.jvp(g, (psi0,), (jnp.ones_like(psi0),), has_aux=True)
+    return gc, ok, dg
+
+
+def _cusp(base, psi, gap, p):
+    """Refine a fold path's end to the cusp of its fold pair, with dG_c/dPsi0."""
+    gc, ok, dg = jax.device_get(_cusp_gap(base, psi, jnp.asarray(gap), jnp.asarray(p["theta"]),
+                                          jnp.asarray(p["force"]), jnp.asarray(p["alpha"]), jnp.asarray(p["mode"])))
+    if not bool(ok) or not gap - 1e-6 <= float(gc) < 1.0:
+        return {}
+    return dict(cusp=float(gc), dcusp=float(dg))

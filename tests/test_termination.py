@@ -91,3 +91,35 @@ def test_termination_gaps_cross_checked(snap):
     # (a fold in G of the alpha = 0 branch at G/L ~ 0.645)
     assert out[30.0].reason_up == "start_state_lost" and abs(out[30.0].gap_up - 0.645) < 2e-3
     assert all(math.isfinite(out[p].alpha_c_up) for p in out)
+
+
+@pytest.mark.slow
+def test_cusp_gap_and_derivative_fd(snap):
+    """The snap-down path of Psi0 = 60 deg ends at a cusp of its fold pair: the cusp system
+    converges (residual, the cubic coefficient vanishes), lies above the snap criterion's G*,
+    and dG_c/dPsi0 by implicit differentiation matches central differences that re-solve it."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    from helpers import central_difference
+
+    g0 = 0.7399
+    p = snap(60.0, g0).down
+    assert int(p.kind) == 1
+    base = jr.make_scene(60.0, g0, 0.0)
+
+    @jax.jit
+    def gc(x):
+        sc = eqx.tree_at(lambda s: s.strip.psi0, base, x[0])
+        return jr.cusp_point(sc, p.theta_before, p.force_before, p.alpha_c, p.mode).gap[None]
+
+    x0 = np.array([math.radians(60.0)])
+    cp = jr.cusp_point(base, p.theta_before, p.force_before, p.alpha_c, p.mode)
+    assert cp.result == jr.RESULTS.successful and float(cp.residual) < 1e-10
+    r = jr.termination_gap(60.0, tol=1e-4)
+    assert r.gap_down <= float(cp.gap) < 1.0 and abs(r.cusp_gap_down - float(cp.gap)) < 1e-8
+    J = jax.jacfwd(gc)(jnp.asarray(x0))
+    fd = central_difference(gc, x0)
+    assert float(J[0, 0]) > 0  # the cusp moves to larger gaps for wider folds (the paper)
+    np.testing.assert_allclose(np.asarray(J), np.asarray(fd), rtol=1e-6)
+    np.testing.assert_allclose(r.dcusp_gap_dpsi0_down, float(J[0, 0]), rtol=1e-6)

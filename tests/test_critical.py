@@ -1,0 +1,171 @@
+"""Critical points on the extended system (issue 3): refinement to 1e-8 rad, regularity at
+folds and (symmetry-restricted) branch points, implicit gradients against central
+differences, vmap equals loop, no recompilation."""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxrod as jr
+from jaxrod import _kkt
+from jaxrod._critical import _fold_residual, extended_jacobian
+from helpers import central_difference, count_compiles
+
+
+jax.config.update("jax_enable_x64", True)
+
+PSI0, GAP = 60.0, 0.5
+
+
+@pytest.fixture(scope="module")
+def base():
+    return jr.make_scene(PSI0, GAP, 0.0)
+
+
+@pytest.fixture(scope="module")
+def snap(base):
+    return jax.jit(jr.snap_angles)(base)
+
+
+def scene_of(base, p):
+    """p = (psi0 [rad], gap, s0) as traced leaves."""
+    return eqx.tree_at(lambda s: (s.strip.psi0, s.clamps.gap, s.strip.s0), base, (p[0], p[1], p[2]))
+
+
+P0 = np.array([math.radians(PSI0), GAP, 0.02])
+
+
+@pytest.fixture(scope="module")
+def refine(base):
+    """critical_point at parameters p from a fixed start (the path's critical state)."""
+
+    @jax.jit
+    def f(p, theta, force, alpha, mode, kind):
+        cp = jr.critical_point(scene_of(base, p), theta, force, alpha, mode, kind)
+        return cp
+
+    return f
+
+
+def _start(path):
+    return path.theta_before, path.force_before, path.alpha_c, path.mode, path.kind
+
+
+def test_paths_refined_known_values(snap):
+    # values of our solver at n = 100 (see the brief / README): up at a branch point, down at a fold
+    assert int(snap.up.kind) == 2 and int(snap.down.kind) == 1
+    assert abs(math.degrees(float(snap.up.alpha_c)) - 77.31) < 0.01
+    assert abs(math.degrees(float(snap.down.alpha_c)) + 82.89) < 0.01
+    for path in (snap.up, snap.down):
+        assert path.refine_result == jr.RESULTS.successful
+
+
+def test_extended_system_converges_to_1e8(snap, base, refine):
+    """From a start 2e-3 rad off in alpha (and a perturbed state), Newton on the extended
+    system returns to the same critical point to 1e-8 rad; the residuals of the
+    equilibrium and of K v = 0 are checked independently of the solver."""
+    for path in (snap.up, snap.down):
+        t, m, a, v, k = _start(path)
+        noise = 1e-3 * jnp.cos(7.0 * jnp.arange(t.shape[0]))
+        noise = noise - noise[::-1] if int(k) == 2 else noise  # keep the symmetric state symmetric
+        cp = refine(jnp.asarray(P0), t + noise, m, a + 2e-3, v, k)
+        assert cp.result == jr.RESULTS.successful
+        assert abs(float(cp.alpha - path.alpha_c)) < 1e-8
+        assert float(cp.residual) < 1e-10
+        sc = jr.SymmetricAlpha().set(base, cp.alpha)
+        gt, gm = jax.grad(jr.lagrangian, argnums=(0, 1))(cp.theta, cp.force, sc)
+        assert float(jnp.max(jnp.abs(gt))) < 1e-9 and float(jnp.max(jnp.abs(gm))) < 1e-9
+        K = _kkt.structured(cp.theta, cp.force, sc).dense()
+        kv = K @ jnp.concatenate([cp.mode, cp.mode_force])
+        assert float(jnp.max(jnp.abs(kv))) < 1e-8 * float(jnp.max(jnp.abs(K)))
+        # the critical state has a zero constrained eigenvalue, none below it
+        lam = _kkt.smallest_eigenvalues(_kkt.structured(cp.theta, cp.force, sc), 2)
+        assert abs(float(lam[0])) < 1e-7 and float(lam[1]) > 1e-2
+        # the mode is asymmetric at the branch point, symmetric at the fold
+        parity = float(jnp.sum(cp.mode * -cp.mode[::-1]) / jnp.sum(cp.mode**2))
+        assert parity < -0.999 if int(k) == 2 else parity > 0.999
+
+
+def test_extended_jacobians_regular(snap, base, refine):
+    """The restricted branch-point system and the fold system are regular (moderate
+    condition numbers); the *unrestricted* Moore-Spence system at the branch point is
+    singular, which is why the branch point is posed on the symmetric subspace."""
+    bp = refine(jnp.asarray(P0), *_start(snap.up))
+    fold = refine(jnp.asarray(P0), *_start(snap.down))
+    for cp in (bp, fold):
+        s = np.linalg.svd(np.asarray(extended_jacobian(base, cp)), compute_uv=False)
+        assert s[-1] > 1e-4 and s[0] / s[-1] < 1e7
+    d = jr.discretize(base)
+    ell = d.h * bp.mode / jnp.sum(d.h * bp.mode**2)
+    z = jnp.concatenate([bp.theta, bp.force, bp.alpha[None], bp.mode, bp.mode_force])
+    J = jax.jit(jax.jacfwd(lambda z: _fold_residual(z, base, jr.SymmetricAlpha(), ell)))(z)
+    s = np.linalg.svd(np.asarray(J), compute_uv=False)
+    assert s[-1] / s[0] < 1e-9
+
+
+def _batched(refine, start):
+    """vmap over parameter rows (the same batched compile serves FD and the vmap test)."""
+    return jax.vmap(lambda p: _pick(refine(p, *start)))
+
+
+def _pick(cp):
+    return jnp.stack([cp.alpha, cp.fold_height, cp.result._value.astype(cp.alpha.dtype)])
+
+
+def test_gradients_match_central_differences(snap, refine):
+    """d alpha_c / d(psi0, G, s0) and d(fold height)/d(...) at the branch point and the fold,
+    by implicit differentiation (jax.jacrev through the jitted refinement); the central
+    differences re-solve the extended system at p +- h."""
+    for path in (snap.up, snap.down):
+        start = _start(path)
+        J = jax.jacrev(lambda p: _pick(refine(p, *start))[:2])(jnp.asarray(P0))
+        fd = central_difference(lambda p: _pick(refine(p, *start))[:2], P0, scale=[1.0, 1.0, 0.02])
+        assert np.all(np.abs(np.asarray(J)) > 1e-4)  # every derivative is non-trivial
+        np.testing.assert_allclose(np.asarray(J), np.asarray(fd), rtol=1e-6, atol=1e-9)
+
+
+def test_vmap_equals_loop_bad_member_alone_no_recompile(snap, refine):
+    start = _start(snap.down)
+    P = np.tile(P0, (3, 1))
+    P[:, 1] = [0.49, 0.51, np.nan]
+    out = np.asarray(_batched(refine, start)(jnp.asarray(P)))
+    ok = out[:, 2] == 0  # RESULTS.successful
+    assert ok.tolist() == [True, True, False]
+    for i in range(2):
+        single = np.asarray(_pick(refine(jnp.asarray(P[i]), *start)))
+        np.testing.assert_allclose(out[i], single, rtol=0, atol=1e-12)
+    assert abs(out[0, 0] - out[1, 0]) > 1e-3  # different members, not one broadcast
+    with count_compiles() as c:
+        refine(jnp.asarray(P[0] * [1.0, 1.0, 1.1]), *start)
+        _batched(refine, start)(jnp.asarray(P[::-1]))
+    assert c[0] == 0
+
+
+@pytest.mark.slow
+def test_snap_angles_gradients_fd(base):
+    """jax.grad through snap_angles (the refined critical point) against central differences
+    that re-run snap_angles at p +- h, under jit; vmap of snap_angles equals the loop."""
+
+    def f(p):
+        r = jr.snap_angles(scene_of(base, p))
+        return jnp.stack([r.up.alpha_c, r.down.alpha_c, r.up.fold_height_before, r.down.fold_height_before])
+
+    jf = jax.jit(f)
+    J = jax.jit(jax.jacrev(f))(jnp.asarray(P0))
+    fd = central_difference(jf, P0, scale=[1.0, 1.0, 0.02])
+    np.testing.assert_allclose(np.asarray(J), np.asarray(fd), rtol=1e-6, atol=1e-9)
+    g = jax.jit(jax.grad(lambda p: jr.snap_angles(scene_of(base, p)).up.alpha_c))(jnp.asarray(P0))
+    np.testing.assert_allclose(np.asarray(g), np.asarray(J[0]), rtol=1e-10)
+    # vmap (jit) over parameters equals the loop
+    P = np.tile(P0, (2, 1))
+    P[1, 1] = 0.55
+    Jb = jax.jit(jax.vmap(jax.jacrev(f)))(jnp.asarray(P))
+    np.testing.assert_allclose(np.asarray(Jb[0]), np.asarray(J), rtol=1e-9, atol=1e-12)
+    J1 = jax.jit(jax.jacrev(f))(jnp.asarray(P[1]))
+    np.testing.assert_allclose(np.asarray(Jb[1]), np.asarray(J1), rtol=1e-9, atol=1e-12)
