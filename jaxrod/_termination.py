@@ -33,8 +33,13 @@ What ends each path (`reason_*`):
   `snap_angles` would stop resolving it;
 - `"never_snaps"`: no grid gap snaps ($G^\ast$ is NaN).
 
-The derivative $dG^\ast/d\Psi_0$ is not provided: $G^\ast$ is the end of a discrete
-search, and (see the README) an implicit derivative needs the cusp system.
+For a path that ends at a cusp the end is also located exactly, independent of the jump
+criterion: [`jaxrod.cusp_point`][] solves the fold system augmented by the gap and the
+vanishing cubic coefficient $\tilde{\mathcal L}^{(3)}[v,v,v]=0$, from the fold at $G^\ast_-$,
+giving the cusp gap $G_c\ (\ge G^\ast)$ and $dG_c/d\Psi_0$ by implicit differentiation
+(`cusp_gap_*`, `dcusp_gap_dpsi0_*`). Between $G^\ast$ and $G_c$ the fold pair still exists
+but its jump is below the snap criterion. The bisection gap $G^\ast$ ends a discrete search
+and has no derivative.
 """
 
 from __future__ import annotations
