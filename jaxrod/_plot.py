@@ -143,3 +143,122 @@ def plot_equilibria(eqs, labels, path, title=None):
         os.makedirs(d, exist_ok=True)
     fig.savefig(path)
     return path
+
+
+def _agg_figure(figsize):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, dpi=130)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig, path):
+    d = os.path.dirname(os.fspath(path))
+    if d:
+        os.makedirs(d, exist_ok=True)
+    fig.savefig(path)
+    return path
+
+
+def plot_hysteresis(h, path, title=None):
+    r"""Write the quasi-static loop of a [`jaxrod.Hysteresis`][] `h` to `path`, laid out
+    like the paper's Fig. 2a-b (fold height $y(L/2)/L$ vs $\alpha$) with a second panel
+    like its Fig. 3c (bending energy $E_b L/B$ of both equilibria vs $\alpha$).
+
+    Branch through the down start state in blue, through the up start state in red;
+    stable points solid, unstable dashed; the snaps are arrows at $\alpha_c$ from the
+    critical state to the state it lands in. **Returns:** `path`."""
+    fig = _agg_figure((11.0, 4.4))
+    ax, bx = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
+    alpha = np.degrees(np.asarray(h.alpha, float))
+    fh = np.asarray(h.fold_height, float)
+    eb = np.asarray(h.bending_energy, float)
+    nu = np.asarray(h.num_unstable)
+    valid = np.asarray(h.valid)
+    colors = ["tab:blue", "tab:blue", "tab:red", "tab:red"]
+    labels = ["from the down state", None, "from the up state", None]
+    for b in range(alpha.shape[0]):
+        v = valid[b]
+        a, y, e, u = alpha[b][v], fh[b][v], eb[b][v], nu[b][v]
+        for ys, axis, marker in ((y, ax, None), (e, bx, "o")):
+            stable = np.where(u == 0, ys, np.nan)
+            unstable = np.where(u > 0, ys, np.nan)
+            # join the two styles at the stability change
+            for i in range(1, len(u)):
+                if (u[i] == 0) != (u[i - 1] == 0):
+                    unstable[i - 1 if u[i] == 0 else i - 1] = ys[i - 1]
+                    unstable[i] = ys[i]
+            axis.plot(a, stable, "-", color=colors[b], linewidth=2.0, marker=marker, markersize=3,
+                      label=labels[b] + " (stable)" if labels[b] and axis is ax else None)
+            axis.plot(a, unstable, "--", color=colors[b], linewidth=1.2,
+                      label=labels[b] + " (unstable)" if labels[b] and axis is ax else None)
+    for p, sign, eb0, eb1, name in ((h.snap.up, 1, h.energy_before_up, h.energy_after_up, "snap up"),
+                                    (h.snap.down, -1, h.energy_before_down, h.energy_after_down, "snap down")):
+        if not bool(p.snaps):
+            continue
+        ac = math.degrees(float(p.alpha_c))
+        y0, y1 = float(p.fold_height_before), float(p.fold_height_after)
+        ax.annotate("", xy=(ac, y1), xytext=(ac, y0),
+                    arrowprops=dict(arrowstyle="->", color="k", linewidth=1.4))
+        ax.text(ac, 0.5 * (y0 + y1), f" {name}\n α_c = {ac:+.2f}°", fontsize=8,
+                ha="left" if sign > 0 else "right")
+        bx.annotate("", xy=(ac, float(eb1)), xytext=(ac, float(eb0)),
+                    arrowprops=dict(arrowstyle="->", color="k", linewidth=1.2))
+    ax.axhline(0.0, color="0.6", linewidth=0.8, linestyle=":")
+    ax.set_xlabel("α (deg)")
+    ax.set_ylabel("fold height y(L/2) / L")
+    ax.legend(fontsize=8, loc="upper left")
+    bx.set_xlabel("α (deg)")
+    bx.set_ylabel("bending energy E_b L / B")
+    for axis in (ax, bx):
+        axis.grid(True, linewidth=0.3, alpha=0.5)
+        lo, hi = np.nanmin(alpha), np.nanmax(alpha)
+        axis.set_xlim(max(lo, -150.0) - 5, min(hi, 150.0) + 5)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_phase_diagram(ds, path, termination_gaps=None, title=None):
+    r"""Write the phase diagram of an `xarray.Dataset` from [`jaxrod.phase_diagram`][]
+    like the paper's Fig. 2c: $\alpha_{c,\rm up}$ (above zero, filled circles) and
+    $\alpha_{c,\rm down}$ (below zero, open circles) vs $G/L$, one colour per $\Psi_0$;
+    branch points marked with a cross. `termination_gaps`, a dict
+    `{psi0_deg: (G*_up, G*_down)}`, adds dashed vertical lines. **Returns:** `path`."""
+    import matplotlib
+
+    fig = _agg_figure((7.5, 5.5))
+    ax = fig.add_subplot(1, 1, 1)
+    cmap = matplotlib.colormaps["viridis"]
+    psis = np.asarray(ds["psi0"].values, float)
+    g = np.asarray(ds["gap"].values, float)
+    for i, psi in enumerate(psis):
+        c = cmap(i / max(len(psis) - 1, 1))
+        up = np.asarray(ds["alpha_c_up"].sel(psi0=psi).values, float)
+        dn = np.asarray(ds["alpha_c_down"].sel(psi0=psi).values, float)
+        ku = np.asarray(ds["kind_up"].sel(psi0=psi).values)
+        kd = np.asarray(ds["kind_down"].sel(psi0=psi).values)
+        ax.plot(g, up, "o-", color=c, markersize=4, linewidth=1.2, label=f"Ψ0 = {psi:g}°")
+        ax.plot(g, dn, "o--", color=c, markersize=4, markerfacecolor="white", linewidth=1.2)
+        for y, k in ((up, ku), (dn, kd)):
+            bp = k == 2
+            ax.plot(g[bp], y[bp], "x", color="k", markersize=4, linewidth=0.8)
+        if termination_gaps and psi in termination_gaps:
+            for gs, ls in zip(termination_gaps[psi], ("-.", ":")):
+                if gs is not None and np.isfinite(gs) and gs < 1.0:
+                    ax.axvline(gs, color=c, linestyle=ls, linewidth=1.0)
+    ax.axhline(0.0, color="0.3", linewidth=0.8)
+    ax.plot([], [], "x", color="k", label="branch point (else fold)")
+    if termination_gaps:
+        ax.plot([], [], "-.", color="0.4", label="G* snap up")
+        ax.plot([], [], ":", color="0.4", label="G* snap down")
+    ax.set_xlabel("G / L")
+    ax.set_ylabel("α_c (deg): snap up > 0, snap down < 0")
+    ax.grid(True, linewidth=0.3, alpha=0.5)
+    ax.legend(fontsize=8, loc="best", ncol=2)
+    ax.set_title(title or "critical clamp angles (symmetric actuation)", fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)

@@ -1,0 +1,167 @@
+r"""Phase diagram of the snap angles (paper Fig. 2c): $\alpha_{c,\rm up}$ and
+$\alpha_{c,\rm down}$ of [`jaxrod.snap_angles`][] over a grid of fold angles $\Psi_0$ and
+gaps $G/L$ (symmetric actuation, $\alpha_L=\alpha_R=\alpha$, conventions of MODEL.md).
+
+One chunk per $\Psi_0$: a single jitted call `vmap`ped over the gaps. $\Psi_0$ and the
+gaps are traced, so every chunk reuses one compilation (per mesh and grid length).
+Under `vmap` each member keeps its own result code: a gap where a state does not exist
+gives NaN angles there and does not affect the others.
+
+With `out`, each finished chunk is written to `out/chunks/psi0_<deg>.nc` (NetCDF3 via
+scipy) and the run is resumable: a chunk whose file exists with the same grid, $s_0$
+and mesh is read back, not recomputed. The assembled `xarray.Dataset` goes to
+`out/phase_diagram.nc`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._misc import check_param
+from ._rod import Clamps, Mesh, Scene, Strip
+from ._snap import snap_angles
+
+VARIABLES = ("alpha_c_up", "alpha_c_down", "kind_up", "kind_down", "fold_height_before_up",
+             "fold_height_after_up", "fold_height_before_down", "fold_height_after_down",
+             "start_up", "start_down")
+
+
+@eqx.filter_jit
+def _chunk(psi0, gaps, s0, mesh):
+    """All gaps at one fold angle (rad): one vmapped `snap_angles`."""
+
+    def one(g):
+        r = snap_angles(Scene(Strip(psi0=psi0, s0=s0), Clamps(g), mesh))
+        out = {}
+        for name, p in (("up", r.up), ("down", r.down)):
+            out[f"alpha_c_{name}"] = jnp.degrees(p.alpha_c)
+            out[f"kind_{name}"] = p.kind.astype(jnp.int32)
+            out[f"fold_height_before_{name}"] = p.fold_height_before
+            out[f"fold_height_after_{name}"] = p.fold_height_after
+            out[f"start_{name}"] = p.result._value.astype(jnp.int32)
+        return out
+
+    return jax.vmap(one)(gaps)
+
+
+def _attrs(gaps, s0, n, refine):
+    return {"gaps_hash": ",".join(f"{g:.12g}" for g in gaps), "s0": float(s0), "n": int(n),
+            "refine": float(refine)}
+
+
+def _chunk_dataset(psi0_deg, gaps, values, attrs):
+    import xarray as xr
+
+    data = {}
+    for k in VARIABLES:
+        v = np.asarray(values[k])
+        data[k] = (("gap",), v.astype(np.int32) if v.dtype.kind in "iub" else v.astype(np.float64))
+    ds = xr.Dataset(data, coords={"gap": np.asarray(gaps, float)}, attrs=attrs)
+    return ds.expand_dims(psi0=[float(psi0_deg)])
+
+
+def _chunk_path(out, psi0_deg):
+    return os.path.join(out, "chunks", f"psi0_{psi0_deg:.6g}.nc")
+
+
+def _read_chunk(path, attrs):
+    import xarray as xr
+
+    if not os.path.exists(path):
+        return None
+    try:
+        with xr.open_dataset(path, engine="scipy") as ds:
+            ds = ds.load()
+    except Exception:  # a truncated file from an interrupted write: recompute it
+        return None
+    if any(ds.attrs.get(k) != v for k, v in attrs.items()):
+        return None
+    return ds
+
+
+def _write(ds, path):
+    tmp = path + ".part"
+    ds.to_netcdf(tmp, engine="scipy", format="NETCDF3_64BIT")
+    os.replace(tmp, path)  # atomic: an interrupted write never leaves a half chunk
+
+
+def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progress=True, on_chunk=None):
+    r"""Critical clamp angles over the grid `psi0_deg` x `gaps` (an `xarray.Dataset`).
+
+    **Arguments:** `psi0_deg` fold angles in (0, 180] (degrees), `gaps` values of $G/L$ in
+    (0, 1), `s0`, `n`, `refine` as in [`jaxrod.make_scene`][]; `out` a directory for the
+    resumable chunk files and `phase_diagram.nc`; `progress` a tqdm bar;
+    `on_chunk(psi0_deg, computed: bool)` called after each chunk.
+
+    **Returns:** dataset with dims `(psi0, gap)`: `alpha_c_up`, `alpha_c_down` (degrees,
+    NaN where the path does not snap), `kind_up`/`kind_down` (0 none, 1 fold, 2 branch
+    point), fold heights before/after each snap, `start_up`/`start_down` (RESULTS codes of
+    the start states); attribute `computed_chunks` lists the $\Psi_0$ computed by this call
+    (the others were read back from `out`). Needs float64.
+    """
+    import xarray as xr
+
+    psis = [float(p) for p in np.atleast_1d(psi0_deg)]
+    gaps = [float(g) for g in np.atleast_1d(gaps)]
+    if not psis or not gaps:
+        raise ValueError("psi0 and gaps must each hold at least one value")
+    for p in psis:
+        check_param("psi0", p, lo=0.0, hi=180.0, hi_open=False, unit=" deg")
+    for g in gaps:
+        check_param("gap", g, lo=0.0, hi=1.0)
+    check_param("s0", s0, lo=0.0)
+    mesh = Mesh(n, refine)
+    if not jax.config.jax_enable_x64:
+        raise ValueError("phase_diagram needs float64; enable it with jax.config.update('jax_enable_x64', True)")
+    attrs = _attrs(gaps, s0, n, refine)
+    if out is not None:
+        os.makedirs(os.path.join(out, "chunks"), exist_ok=True)
+    g_arr = jnp.asarray(gaps, jnp.float64)
+    s0_arr = jnp.asarray(float(s0), jnp.float64)
+    chunks, computed = [], []
+    it = psis
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(psis, desc="phase diagram", unit="Psi0")
+    for p in it:
+        ds = _read_chunk(_chunk_path(out, p), attrs) if out is not None else None
+        if ds is None:
+            vals = jax.device_get(_chunk(jnp.asarray(math.radians(p), jnp.float64), g_arr, s0_arr, mesh))
+            ds = _chunk_dataset(p, gaps, vals, attrs)
+            if out is not None:
+                _write(ds, _chunk_path(out, p))
+            computed.append(p)
+        chunks.append(ds)
+        if on_chunk is not None:
+            on_chunk(p, p in computed)
+    full = xr.concat(chunks, dim="psi0")
+    full.attrs = dict(attrs, units="alpha in degrees, G/L and fold heights in units of L",
+                      kinds="0 none, 1 fold, 2 branch_point")
+    full["alpha_c_up"].attrs["long_name"] = "snap-up critical clamp angle (deg)"
+    full["alpha_c_down"].attrs["long_name"] = "snap-down critical clamp angle (deg)"
+    if out is not None:
+        _write(full, os.path.join(out, "phase_diagram.nc"))
+    full.attrs["computed_chunks"] = computed
+    return full
+
+
+def termination_gaps(psi0_deg, *, s0=0.02, n=100):
+    """Hook for the figure: `{psi0: (G*_up, G*_down)}` from `jaxrod.termination_gap` if the
+    installed jaxrod has it, else `None` (no vertical lines are drawn)."""
+    import jaxrod
+
+    fn = getattr(jaxrod, "termination_gap", None)
+    if fn is None:
+        return None
+    out = {}
+    for p in np.atleast_1d(psi0_deg):
+        t = fn(float(p), s0=s0, n=n)
+        out[float(p)] = (float(t.gap_up), float(t.gap_down))
+    return out

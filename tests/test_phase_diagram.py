@@ -1,0 +1,137 @@
+"""Phase diagram (paper Fig. 2c): resumable NetCDF chunks, the CLI, the figure, and
+(slow) the real vmapped computation against single `snap_angles` calls."""
+
+import json
+import os
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxrod as jr
+from jaxrod import _phase
+
+
+def _fake_chunk(calls):
+    """Stand-in for the compiled chunk: deterministic values, and a record of each call."""
+
+    def f(psi0, gaps, s0, mesh):
+        calls.append(float(psi0))
+        g = np.asarray(gaps)
+        p = float(psi0)
+        out = {k: np.sin(p * (i + 1) + 3.0 * g) for i, k in enumerate(_phase.VARIABLES)}
+        for k in ("kind_up", "kind_down", "start_up", "start_down"):
+            out[k] = (np.arange(g.size) % 3).astype(np.int32)
+        out["alpha_c_down"][0] = np.nan  # a point that does not snap
+        return out
+
+    return f
+
+
+class _Stop(Exception):
+    pass
+
+
+def test_resume_after_interrupt(tmp_path, monkeypatch):
+    psis, gaps = [30.0, 60.0, 180.0], [0.2, 0.5, 0.8]
+    calls = []
+    monkeypatch.setattr(_phase, "_chunk", _fake_chunk(calls))
+
+    def interrupt(p, computed):
+        raise _Stop
+
+    with pytest.raises(_Stop):  # interrupted right after the first chunk was written
+        jr.phase_diagram(psis, gaps, n=40, out=str(tmp_path / "a"), progress=False, on_chunk=interrupt)
+    assert calls == [pytest.approx(np.radians(30.0))]
+    assert os.path.exists(tmp_path / "a" / "chunks" / "psi0_30.nc")
+    assert not os.path.exists(tmp_path / "a" / "phase_diagram.nc")
+    calls.clear()
+    seen = []
+    resumed = jr.phase_diagram(psis, gaps, n=40, out=str(tmp_path / "a"), progress=False,
+                               on_chunk=lambda p, c: seen.append((p, c)))
+    # the finished chunk is read back, only the two others are computed
+    assert calls == [pytest.approx(np.radians(60.0)), pytest.approx(np.radians(180.0))]
+    assert seen == [(30.0, False), (60.0, True), (180.0, True)]
+    assert resumed.attrs["computed_chunks"] == [60.0, 180.0]
+    calls.clear()
+    whole = jr.phase_diagram(psis, gaps, n=40, out=str(tmp_path / "b"), progress=False)
+    assert len(calls) == 3
+    for k in _phase.VARIABLES:
+        np.testing.assert_array_equal(resumed[k].values, whole[k].values)
+    # the file on disk holds the same
+    import xarray as xr
+
+    with xr.open_dataset(tmp_path / "a" / "phase_diagram.nc", engine="scipy") as ds:
+        np.testing.assert_array_equal(ds["alpha_c_up"].values, whole["alpha_c_up"].values)
+        assert ds["alpha_c_up"].dims == ("psi0", "gap")
+    # a different grid (or mesh) does not reuse the chunks
+    calls.clear()
+    jr.phase_diagram(psis, gaps, n=60, out=str(tmp_path / "a"), progress=False)
+    assert len(calls) == 3
+    # a truncated chunk file is recomputed, not trusted
+    (tmp_path / "a" / "chunks" / "psi0_60.nc").write_bytes(b"CDF\x02garbage")
+    calls.clear()
+    jr.phase_diagram(psis, gaps, n=60, out=str(tmp_path / "a"), progress=False)
+    assert calls == [pytest.approx(np.radians(60.0))]
+
+
+def test_figure_and_termination_hook(tmp_path, monkeypatch):
+    calls = []
+    monkeypatch.setattr(_phase, "_chunk", _fake_chunk(calls))
+    ds = jr.phase_diagram([60.0, 180.0], [0.2, 0.5, 0.8], progress=False)
+    png = jr.plot_phase_diagram(ds, str(tmp_path / "pd.png"), termination_gaps={60.0: (0.7, 0.75)})
+    assert os.path.getsize(png) > 10_000
+    # the hook: None exactly when the library has no termination_gap
+    monkeypatch.delattr(jr, "termination_gap", raising=False)
+    assert _phase.termination_gaps([60.0]) is None
+
+
+@pytest.mark.parametrize("argv, name", [
+    (["--psi0", "30,200"], "psi0"),
+    (["--gaps", "0.1:1.2:0.1"], "gap"),
+    (["--gaps", "0.5:0.1:0.1"], "gaps"),
+    (["--psi0", "abc"], "psi0"),
+    (["--s0", "0"], "s0"),
+    (["--n", "7"], "n"),
+    (["--gaps", "nan"], "gap"),
+])
+def test_cli_bad_input(argv, name, capsys, tmp_path):
+    from jaxrod._cli import main
+
+    assert main(["phase-diagram", "--out", str(tmp_path), *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and name in err[0]
+
+
+def test_cli_json(tmp_path, monkeypatch, capsys):
+    calls = []
+    monkeypatch.setattr(_phase, "_chunk", _fake_chunk(calls))
+    from jaxrod._cli import main
+
+    out = tmp_path / "pd"
+    assert main(["phase-diagram", "--psi0", "60,180", "--gaps", "0.2:0.6:0.2", "--out", str(out),
+                 "--no-termination", "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["gaps"] == [0.2, 0.4, 0.6] and rec["psi0_deg"] == [60.0, 180.0]
+    assert os.path.exists(rec["netcdf"]) and os.path.exists(rec["png"])
+    assert rec["computed_chunks"] == [60.0, 180.0]
+    assert main(["phase-diagram", "--psi0", "60,180", "--gaps", "0.2:0.6:0.2", "--out", str(out),
+                 "--no-termination", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["computed_chunks"] == []
+
+
+@pytest.mark.slow
+def test_vmapped_chunk_equals_single_calls(tmp_path):
+    """The real computation: one vmapped call per Psi0 equals single `snap_angles` calls,
+    and one bad member (a gap where the down state does not exist) does not poison the batch."""
+    gaps = [0.3, 0.5, 0.8]
+    ds = jr.phase_diagram([30.0, 60.0], gaps, out=str(tmp_path), progress=False)
+    for p in (30.0, 60.0):
+        for g in gaps:
+            r = jr.snap_angles(jr.make_scene(p, g, 0.0))
+            for name, path in (("up", r.up), ("down", r.down)):
+                a = float(ds[f"alpha_c_{name}"].sel(psi0=p, gap=g))
+                b = float(np.degrees(path.alpha_c))
+                assert (np.isnan(a) and np.isnan(b)) or abs(a - b) < 1e-8, (p, g, name, a, b)
+                assert int(ds[f"kind_{name}"].sel(psi0=p, gap=g)) == int(path.kind)
