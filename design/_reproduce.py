@@ -137,8 +137,8 @@ def _dynamics_section(title, paper):
         if not hasattr(jr, "snap_dynamics"):
             return title, "**not available yet**: needs jaxrod's snap dynamics (issue 4).", [
                 (q, pv, "not available yet", "") for q, pv in paper], None
-        return title, ("**not available yet** in this report: jaxrod's dynamics (`jaxrod.snap_dynamics`, "
-                       "`jaxrod snap` / speed-plane CLI) exists but is not wired into `reproduce` yet."), [
+        return title, ("**not available yet** in this report: jaxrod's dynamics exists; run "
+                       "`jaxrod speed-plane` for the fit (not wired into `reproduce` yet)."), [
             (q, pv, "not available yet", "") for q, pv in paper], None
 
     return section
@@ -147,8 +147,41 @@ def _dynamics_section(title, paper):
 section_speed_plane = _dynamics_section(
     "Snap speed plane", [("v_s/v* = a + b G/L + c Psi0: a", "42.59 +- 1.33", ), ("b", "-30.38 +- 2.57"),
                          ("c (Psi0 in rad)", "-5.00 +- 0.26")])
-section_folded_unfolded = _dynamics_section(
-    "Folded vs unfolded snap speed", [("v_s(Psi0 = 30 deg) / v_s(flat), G/L = 0.5", "~2 (8 m/s vs 4 m/s)")])
+
+
+def _vs_record(psi0_deg, gap, n):
+    import jax.numpy as jnp
+
+    import jaxrod as jr
+
+    from ._critical import design_scene
+
+    start, tr = jr.snap_dynamics(design_scene(jnp.deg2rad(psi0_deg), gap, 0.02, n), "up", kind="brink")
+    return {"v_s": float(tr.v_s), "snapped": bool(tr.snapped), "energy_drift": float(tr.energy_drift)}
+
+
+def section_folded_unfolded(cache, n, out, progress, quick=False):
+    import jaxrod as jr
+
+    title = "Folded vs unfolded snap speed"
+    q = "v_s(Psi0 = 30 deg) / v_s(flat), G/L = 0.5 (snap up from the brink)"
+    if not hasattr(jr, "snap_dynamics"):
+        return title, "**not available yet**: needs jaxrod's snap dynamics (issue 4).", [
+            (q, "~2 (8 m/s vs 4 m/s)", "not available yet", "")], None
+    if quick:
+        return title, ("skipped in `--quick` (compiling the dynamics takes minutes); run `jaxrod reproduce` "
+                       "without `--quick`."), [(q, "~2 (8 m/s vs 4 m/s)", "skipped (--quick)", "")], None
+    nd = 40
+    fold = cache.get(f"vs/30/0.5/{nd}", lambda: _vs_record(30.0, 0.5, nd))
+    flat = cache.get(f"vs/180/0.5/{nd}", lambda: _vs_record(180.0, 0.5, nd))
+    ok = fold["snapped"] and flat["snapped"]
+    ratio = fold["v_s"] / flat["v_s"] if ok else None
+    rows = [(q, "~2 (8 m/s vs 4 m/s)", "n/a (no snap)" if ratio is None else f"{ratio:.2f}",
+             f"v_s = {fold['v_s']:.2f} v* (folded), {flat['v_s']:.2f} v* (flat); N = {nd}; "
+             f"energy drift {max(fold['energy_drift'], flat['energy_drift']):.1e}")]
+    text = (f"`jaxrod.snap_dynamics(scene, 'up', kind='brink')` (N = {nd}): the strip is released just past "
+            "alpha_c_up and the peak fold speed v_s recorded (units v*).")
+    return title, text, rows, {"folded": fold, "flat": flat}
 
 
 def run(out, quick=False, progress=True):
@@ -162,7 +195,7 @@ def run(out, quick=False, progress=True):
     cache = _Cache(os.path.join(out, "cache.json"))
     sections = [section_snap_angles, section_no_snap,
                 lambda c, n, o, p: section_master_curves(c, n, o, p, quick=quick),
-                section_speed_plane, section_folded_unfolded]
+                section_speed_plane, lambda c, n, o, p: section_folded_unfolded(c, n, o, p, quick=quick)]
     md = ["# jaxrod reproduces Marzin et al., \"Augmented snap-through instability of folded strips\"", "",
           f"jaxrod {jr.__version__}, {datetime.date.today().isoformat()}, {platform.node()}, "
           f"jax {jax.__version__}, N = {n}{' (quick)' if quick else ''}. Units L = B = lambda = 1, "
