@@ -27,7 +27,7 @@ What ends each path (`reason_*`):
   $\alpha=0$) stops existing at $G^\ast_+$;
 - `"no_termination"`: it still snaps at the largest grid gap ($G^\ast=1$ reported);
 - `"flat_strip_never_stops"`: $\Psi_0=180^\circ$ exactly: the flat strip snaps at every
-  gap (MODEL.md; the snap is a jump to the mirror state, whose size relative to the
+  gap (MODEL.md; the snap is a jump to the other state, whose size relative to the
   buckle amplitude does not shrink as $G\to L$), $G^\ast=1$. Not scanned: near $G=L$
   the absolute jump falls below `JUMP_DISTANCE` (at $G/L\approx0.979$ for n = 100) and
   `snap_angles` would stop resolving it;
@@ -141,9 +141,9 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
         raise ValueError(f"grid must hold gaps in (0, 1), got {grid!r}")
     base = make_scene(float(psi0_deg), 0.5, s0=s0, n=n)
     if float(psi0_deg) == 180.0:
-        # the flat strip: no crease, the problem is also symmetric under theta -> -theta, and
-        # the snap at the branch point keeps its size relative to the buckle amplitude as
-        # G -> L (tests/test_termination.py checks it snaps at G/L = 0.95, landing in the mirror state)
+        # the flat strip: no crease, the snap at the branch point keeps its size relative to
+        # the buckle amplitude as G -> L (tests/test_termination.py checks it snaps at
+        # G/L = 0.95 into the other state with a jump > 2x the critical fold height)
         return TerminationGap(180.0, 1.0, 1.0, (math.nan, math.nan), (math.nan, math.nan),
                               "flat_strip_never_stops", "flat_strip_never_stops", "branch_point", "branch_point",
                               math.nan, math.nan, math.nan, math.nan, 0)
