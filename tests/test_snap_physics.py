@@ -1,0 +1,164 @@
+r"""Physics of the snap angles: flat-strip symmetry, the shallow-arch limit (derived
+below), the paper's qualitative facts, the stability test against dense eigenvalues,
+extremes, and the order of convergence in N.
+
+Shallow-arch limit of the flat strip (Psi0 = 180 deg) as G -> L.
+Write the deflection w(x), x in [0, L], end shortening delta = L - G. Linear shallow-beam
+theory: energy (B/2) int w''^2 with the inextensibility constraint
+(1/2) int w'^2 dx = delta, so B w'''' + P w'' = 0 with P = B tau^2 the compression
+(the Lagrange multiplier), w(0) = w(L) = 0 and, for the mirror-symmetric clamp
+rotation of MODEL.md, w'(0) = alpha, w'(L) = -alpha. Scale L = 1, w = sqrt(delta) W,
+alpha = sqrt(delta) A: then (1/2) int W'^2 = 1, W'(0) = A, W'(1) = -A, independent of
+delta. With xi = x - 1/2 the general solution is W = a + b xi + c cos(tau xi) + d sin(tau xi).
+* Symmetric part: W'(+-1/2) = -+A gives c = A / (tau sin(tau/2)), and W(+-1/2) = 0 gives
+  a = -c cos(tau/2): W = c (cos tau xi - cos tau/2). The constraint
+  (c^2 tau^2 / 2) int sin^2(tau xi) = 1 gives the symmetric branch
+  A^2 = 4 sin^2(tau/2) / (1 - sin(tau)/tau). It passes A = 0 at tau = 2 pi (the first
+  Euler load 4 pi^2 B/L^2, the buckled up and down states W(0) = +-2/pi), and along the
+  down state A grows with tau.
+* Antisymmetric part: b + d tau cos(tau/2) = 0 and b/2 + d sin(tau/2) = 0 have a
+  solution d != 0 only where tan(tau/2) = tau/2, first at tau_1 = 8.9868 (the second
+  clamped-clamped Euler load, 80.76 B/L^2). There the asymmetric mode can grow while the
+  symmetric part shrinks to keep (1/2) int W'^2 = 1: an asymmetric branch exists for
+  |A| < A_bp and meets the symmetric one at A_bp, a subcritical pitchfork, so the
+  symmetric state loses stability there through an asymmetric mode (a branch point).
+* At tau_1, sin(tau)/tau = 2 sin(tau/2) cos(tau/2)/tau = cos^2(tau/2) because
+  sin(tau/2) = (tau/2) cos(tau/2), so 1 - sin(tau)/tau = sin^2(tau/2) and A_bp^2 = 4:
+  A_bp = 2 exactly. The symmetric branch has A = 2 again at tau = 3 pi, so its fold
+  (a maximum of A between tau_1 and 3 pi) comes after the branch point.
+Hence alpha_c / sqrt(1 - G/L) -> 2 (radians) as G -> L, on both paths, with a branch
+point. The next order of the expansion is O(delta), so the deviation should fall
+linearly in 1 - G/L: this is what test_shallow_arch_limit measures.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxrod as jr
+from helpers import loglog_slope
+
+
+@pytest.fixture(scope="module")
+def snap():
+    cache = {}
+
+    def f(psi0, gap, **kw):
+        key = (psi0, gap, tuple(sorted(kw.items())))
+        if key not in cache:
+            cache[key] = jr.snap_angles(jr.make_scene(psi0, gap, 0.0, **kw))
+        return cache[key]
+
+    return f
+
+
+def _valid(path):
+    """A snap has a finite angle and a kind; no snap has NaN and kind none."""
+    a, k = float(path.alpha_c), int(path.kind)
+    return (bool(path.snaps) and np.isfinite(a) and k in (1, 2)) or (not bool(path.snaps) and np.isnan(a) and k == 0)
+
+
+@pytest.mark.parametrize("gap", [0.3, 0.5, 0.7])
+def test_flat_strip_antisymmetric(snap, gap):
+    r = snap(180.0, gap)
+    assert bool(r.up.snaps) and bool(r.down.snaps)
+    assert abs(float(r.up.alpha_c) + float(r.down.alpha_c)) < 1e-6
+    assert int(r.up.kind) == int(r.down.kind) == 2
+
+
+def test_shallow_arch_limit(snap):
+    """alpha_c / sqrt(1 - G/L) -> 2 for the flat strip (derivation in the module docstring),
+    with a deviation linear in 1 - G/L."""
+    deltas = np.array([0.5, 0.3, 0.2, 0.05])  # 0.1 and < 0.05: see test_flat_strip_snaps_near_full_gap
+    ratio = []
+    for d in deltas:
+        r = snap(180.0, round(1.0 - d, 12))
+        assert bool(r.up.snaps), d
+        assert int(r.up.kind) == 2  # a branch point, as the linear theory says
+        ratio.append(float(r.up.alpha_c) / np.sqrt(d))
+    dev = np.array(ratio) - 2.0
+    assert np.all(dev > 0) and np.all(np.diff(dev) < 0)  # monotone approach from above
+    assert dev[-1] < 0.01
+    slope = loglog_slope(deltas, dev)
+    assert 0.85 < slope < 1.2, (slope, ratio)
+    # extrapolation to delta -> 0 (quadratic fit in delta): the constant is 2. Measured
+    # 1.9969 at N = 100; the discrete second Euler load (tau^2 = 80.8) carries a relative
+    # O(tau^2 h^2 / 12) ~ 7e-4 error, so the tolerance is a few 1e-3, not 1e-6.
+    intercept = np.polyfit(deltas, ratio, 2)[-1]
+    assert abs(intercept - 2.0) < 5e-3, (intercept, ratio)
+
+
+@pytest.mark.xfail(strict=True, reason="snap_angles bug (jaxrod/_snap.py, not this module): for the flat strip "
+                   "at G/L = 0.9 and 0.98 the first stage ends with the stability change, the landing is "
+                   "judged within JUMP_DISTANCE (supercritical) and the second stage runs to the bound, so "
+                   "snaps=False. The flat strip always snaps (MODEL.md).")
+@pytest.mark.parametrize("gap", [0.9, 0.98])
+def test_flat_strip_snaps_near_full_gap(snap, gap):
+    r = snap(180.0, gap)
+    assert bool(r.up.snaps) and bool(r.down.snaps)
+    assert abs(float(r.up.alpha_c) / np.sqrt(1.0 - gap) - 2.0) < 0.03
+
+
+def test_paper_facts(snap):
+    r = snap(30.0, 0.8)
+    assert not bool(r.up.snaps) and not bool(r.down.snaps)
+    r = snap(60.0, 0.5)
+    assert bool(r.up.snaps) and bool(r.down.snaps)
+    assert 0 < float(r.up.alpha_c) < abs(float(r.down.alpha_c))
+
+
+@pytest.mark.parametrize("psi0, gap", [(60.0, 0.5), (90.0, 0.3), (180.0, 0.5), (120.0, 0.7)])
+def test_no_missed_instability_dense(snap, psi0, gap):
+    """Independent stability check: dense eigenvalues of the reduced Hessian at every
+    point of the walked branch are positive before alpha_c and one is negative after."""
+    r = snap(psi0, gap)
+    sc = jr.make_scene(psi0, gap, 0.0)
+    for path in (r.up, r.down):
+        b = jax.tree.map(lambda x: np.asarray(x[0]), path.branch)
+        mins = []
+        for i in range(int(b.count)):
+            s = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), sc,
+                            (jnp.asarray(b.lam[i]), jnp.asarray(b.lam[i])))
+            eq = jr.Equilibrium(jnp.asarray(b.theta[i]), jnp.asarray(b.force[i]), jr.RESULTS.successful,
+                                jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), s)
+            mins.append(float(np.linalg.eigvalsh(np.asarray(jr.dense_reduced_hessian(eq)))[0]))
+        mins = np.array(mins)
+        if bool(path.snaps):
+            assert np.all(mins[:-1] > 0) and mins[-1] < 0, mins
+        else:
+            assert np.all(mins > 0)
+
+
+@pytest.mark.parametrize("psi0, gap, s0", [(60.0, 0.05, 0.02), (60.0, 0.95, 0.02), (10.0, 0.5, 0.02),
+                                           (60.0, 0.5, 0.004), (180.0, 0.05, 0.02)])
+def test_extremes_give_result_or_code(snap, psi0, gap, s0):
+    r = snap(psi0, gap, s0=s0)
+    for path in (r.up, r.down):
+        assert _valid(path), (psi0, gap, s0, float(path.alpha_c), int(path.kind))
+        if bool(path.snaps):
+            assert np.isfinite(float(path.fold_height_before)) and np.isfinite(float(path.fold_height_after))
+
+
+def test_alpha_beyond_90(snap):
+    """Clamp angles beyond +-90 deg: the stable states there are converged equilibria or a
+    clear code, never a silent wrong answer."""
+    for a in (120.0, -120.0):
+        for state in ("up", "down"):
+            eq = jr.initial_state(jr.make_scene(60.0, 0.5, a), state)
+            if eq.result == jr.RESULTS.successful:
+                h = float(jr.fold_height(eq))
+                assert bool(eq.stable) and np.isfinite(h) and (h > 0) == (state == "up")
+            else:
+                assert eq.result == jr.RESULTS.state_not_found or jr.RESULTS[eq.result]
+
+
+@pytest.mark.slow
+def test_order_of_convergence_in_n():
+    """alpha_c converges at second order in N (uniform mesh): (60 deg, 0.5) snap up and the
+    flat strip, N = 50, 100, 200 (see benchmarks/convergence_alpha_c.py for the full study)."""
+    for psi0 in (180.0, 60.0):
+        a = [float(jr.snap_angles(jr.make_scene(psi0, 0.5, 0.0, n=n)).up.alpha_c) for n in (50, 100, 200)]
+        order = np.log2(abs(a[0] - a[1]) / abs(a[1] - a[2]))
+        assert 1.8 < order < 2.3, (psi0, a, order)
