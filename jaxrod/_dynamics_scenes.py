@@ -72,6 +72,11 @@ def brink(scene, direction="up", *, nudge=1e-3, past=1e-3, snap=None) -> Start:
     check_param("past", past, lo=0.0, lo_open=False)
     snap = snap_angles(scene) if snap is None else snap
     path = snap.up if sgn > 0 else snap.down
+    from ._misc import is_concrete
+
+    if is_concrete(path.snaps) and not bool(path.snaps):
+        raise ValueError(f"direction: the quasi-static {direction} path of this scene does not snap "
+                         "(jr.snap_angles found no loss of stability), so there is no brink")
     a = path.alpha_c + sgn * past
     sc = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene,
                      (path.alpha_c, path.alpha_c))
