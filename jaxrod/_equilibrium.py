@@ -11,7 +11,8 @@ minimum from a rough guess, not a saddle:
   ladder);
 * backtracking on the augmented-Lagrangian merit
   $\phi(\theta)=\tilde{\mathcal L}(\theta,\mu^+) + \tfrac\rho2|\nabla_\mu\tilde{\mathcal L}(\theta,\mu^+)|^2$,
-  where a full step that halves the KKT residual is always accepted.
+  where a full step that halves the KKT residual is always accepted; $\rho$ is raised
+  within an iteration where needed to make the Newton direction a descent direction.
 
 With `minimize=False` it is plain Newton (for following unstable branches).
 
@@ -84,9 +85,9 @@ def _newton(scene, theta0, mu0, solver: Newton):
     def L(t, m):
         return lagrangian(t, m, scene, d)
 
-    def merit(t, m):
+    def penalty(t, m):
         gm = jax.grad(lagrangian, argnums=1)(t, m, scene, d)
-        return L(t, m) + 0.5 * rho * jnp.sum(gm**2)
+        return 0.5 * jnp.sum(gm**2)
 
     def cond(c):
         return ~c["done"]
@@ -119,12 +120,22 @@ def _newton(scene, theta0, mu0, solver: Newton):
             cap = jnp.where(jnp.isfinite(cap), cap, 1.0)
             p, q = cap * p, cap * q
             if solver.minimize:
-                f0 = merit(t, m)
-                slope = jax.jvp(merit, (t, m), (p, q))[1]
-                slope = jnp.minimum(slope, 0.0)
+                # The penalty rho is raised for this iteration where the Newton direction
+                # would not descend the merit: with phi = L + rho P, P = |grad_mu L|^2 / 2,
+                # the slope is L' + rho P' and P' ~ -|c|^2 < 0 along a Newton step, so
+                # rho >= 2 max(L', 0) / (-P') + rho_0 makes it <= -|L'| - rho_0 |P'|. Needed
+                # where the force changes a lot while the end condition is nearly met
+                # (the landing after a snap of a shallow arch: |q| ~ 1e2, |c| ~ 1e-3).
+                lag0, slope_l = jax.jvp(L, (t, m), (p, q))
+                pen0, slope_p = jax.jvp(penalty, (t, m), (p, q))
+                need = 2.0 * jnp.maximum(slope_l, 0.0) / jnp.maximum(-slope_p, jnp.finfo(dtype).tiny) + rho
+                rho_it = jnp.where(slope_p < 0.0, jnp.maximum(rho, need), rho)
+                rho_it = jnp.where(jnp.isfinite(rho_it), rho_it, rho)
+                f0 = lag0 + rho_it * pen0
+                slope = jnp.minimum(slope_l + rho_it * slope_p, 0.0)
 
                 def accept(step):
-                    f = merit(t + step * p, m + step * q)
+                    f = L(t + step * p, m + step * q) + rho_it * penalty(t + step * p, m + step * q)
                     armijo = f <= f0 + 1e-4 * step * slope
                     return jnp.isfinite(f) & armijo
 
