@@ -28,7 +28,7 @@ is exactly jaxrod's discrete bending energy (its clamps are ghost segments of ze
 so with this clamp both codes integrate the same discrete equations up to PyElastica's
 finite stretch/shear stiffness and rotary inertia (O(r^2) model differences, measured
 with `--radius`), and jaxrod's tight-tolerance run at the same N is the reference for
-both. (`--clamp director` instead pins the end elements' directors to the clamp angles,
+both. (The "director clamp" variant instead pins the end elements' directors to the clamp angles,
 PyElastica's usual clamp: a different, first-order discretization of the clamp; then
 jaxrod's initial state is not an equilibrium of PyElastica's model.) Time stepping:
 PositionVerlet at fixed dt, with a LaplaceDissipationFilter of order `--filter-order`.
