@@ -10,6 +10,13 @@ r"""Snap scenes: where a dynamic run starts and how the clamps move.
   `rate` rad/T from rest through $\alpha_c$; symmetric by default.
 * **asymmetric**: the left clamp held at its angle, only the right one ramped (the paper's
   Fig. 4).
+
+A symmetric ramp from a mirror-symmetric state never leaves it at a *branch point* (an
+asymmetric mode going unstable): nothing but round-off seeds that mode, so the departure is
+delayed by ~40 e-foldings of its slow growth. `seed` adds an imperfection of that amplitude
+(rad, max-norm), the mirror-breaking shape $\delta\theta(s)=\sin(\pi s/L)$ (even about
+$L/2$, while symmetric states have $\theta(s)=-\theta(L-s)$), projected onto the end
+condition, as real strips have; it is harmless at a fold.
 """
 
 from __future__ import annotations
@@ -58,6 +65,14 @@ def project(theta, scene, steps=8):
     return jax.lax.fori_loop(0, steps, body, theta)
 
 
+def mirror_seed(theta, scene, seed):
+    """`theta` plus `seed` times the mirror-breaking shape sin(pi s / L) at the segment
+    midpoints, projected onto the end condition (see the module docstring)."""
+    d = discretize(scene)
+    s_mid = jnp.cumsum(d.h) - 0.5 * d.h
+    return project(theta + seed * jnp.sin(jnp.pi * s_mid / jnp.sum(d.h)), scene)
+
+
 def _direction(direction):
     if direction not in ("up", "down"):
         raise ValueError(f"direction must be 'up' or 'down', got {direction!r}")
@@ -95,14 +110,17 @@ def brink(scene, direction="up", *, nudge=1e-3, past=1e-3, snap=None) -> Start:
                  path.snaps & (eq.result == RESULTS.successful))
 
 
-def ramp(scene, direction="up", *, rate=0.5, alpha_start=None, right_only=False, snap=None) -> Start:
+def ramp(scene, direction="up", *, rate=0.5, alpha_start=None, right_only=False, snap=None,
+         seed=0.0) -> Start:
     r"""The ramp scene: start at rest in the stable state opposite to `direction` with the
     clamps at `alpha_start` (rad; default $\alpha_c-2^\circ$ in the snapping direction, from
     `jr.snap_angles`), then rotate at `rate` (rad/T, > 0; sign from `direction`). With
     `right_only=True` only the right clamp turns (the left stays at its angle in `scene`
-    when `alpha_start` is given, else at 0)."""
+    when `alpha_start` is given, else at 0). `seed` (rad, >= 0): the mirror-breaking
+    imperfection of the start (module docstring; 0 keeps the exact equilibrium)."""
     sgn = _direction(direction)
     check_param("rate", rate, lo=0.0)
+    check_param("seed", seed, lo=0.0, lo_open=False)
     alpha_c = jnp.nan
     if alpha_start is None:
         if right_only:
@@ -118,23 +136,25 @@ def ramp(scene, direction="up", *, rate=0.5, alpha_start=None, right_only=False,
     from ._observables import bending_energy
 
     rl = 0.0 if right_only else sgn * rate
-    return Start(sc, eq.theta, Protocol(aL, alpha_start, rl, sgn * rate), sgn, alpha_c,
+    theta0 = eq.theta if (isinstance(seed, (int, float)) and seed == 0) else mirror_seed(eq.theta, sc, seed)
+    return Start(sc, theta0, Protocol(aL, alpha_start, rl, sgn * rate), sgn, alpha_c,
                  bending_energy(eq), eq.result == RESULTS.successful)
 
 
 def snap_dynamics(scene, direction="up", *, kind="brink", nudge=1e-2, past=1e-3, rate=0.5,
-                  alpha_start=None, snap=None, **simulate_kwargs):
+                  alpha_start=None, snap=None, seed=0.0, **simulate_kwargs):
     """One dynamic snap: build the `kind` scene ("brink", "ramp" or "asymmetric", see the
-    module docstring) and integrate it with [`jaxrod.simulate`][]. Returns (start, trajectory)."""
+    module docstring; `seed` for the ramps) and integrate it with [`jaxrod.simulate`][].
+    Returns (start, trajectory)."""
     from ._dynamics_solve import simulate
 
     if kind == "brink":
         start = brink(scene, direction, nudge=nudge, past=past, snap=snap)
     elif kind == "ramp":
-        start = ramp(scene, direction, rate=rate, alpha_start=alpha_start, snap=snap)
+        start = ramp(scene, direction, rate=rate, alpha_start=alpha_start, snap=snap, seed=seed)
     elif kind == "asymmetric":
         start = ramp(scene, direction, rate=rate, alpha_start=0.0 if alpha_start is None else alpha_start,
-                     right_only=True)
+                     right_only=True, seed=seed)
         simulate_kwargs.setdefault("stop_at_snap", False)
     else:
         raise ValueError(f"kind must be 'brink', 'ramp' or 'asymmetric', got {kind!r}")
