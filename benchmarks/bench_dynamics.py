@@ -65,7 +65,7 @@ def main():
     load0 = os.getloadavg()
     t_start = time.perf_counter()
     ns = [40] if args.quick else [int(x) for x in args.ns.split(",")]
-    cases = [("tsit5", 1e-4), ("tsit5", 1e-6), ("tsit5", 1e-8), ("dopri8", 1e-6)]
+    cases = [("tsit5", 1e-3), ("tsit5", 1e-4), ("tsit5", 1e-6), ("tsit5", 1e-8), ("dopri8", 1e-4), ("dopri8", 1e-6)]
     if not args.quick:
         cases += [("kvaerno5", 1e-4)]
     rows = []
