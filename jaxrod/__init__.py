@@ -1,6 +1,14 @@
 """jaxrod: differentiable statics and dynamics of creased, snapping elastic strips."""
 
 import importlib.metadata
+import os
+
+
+# jaxlib's CPU LAPACK kernels (the dense solves of the critical-point refinement, eigvalsh)
+# come from scipy's OpenBLAS, whose threads fight XLA's own: on a 2-core machine a 205 x 205
+# solve took 30x longer with the default thread count. One thread unless the user chose
+# (this has an effect only if scipy's OpenBLAS is not loaded yet).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from ._continuation import AbstractParameter as AbstractParameter
 from ._continuation import Branch as Branch
@@ -72,3 +80,7 @@ from ._hysteresis import Hysteresis as Hysteresis
 from ._phase import phase_diagram as phase_diagram
 from ._plot import plot_hysteresis as plot_hysteresis
 from ._plot import plot_phase_diagram as plot_phase_diagram
+from ._extrapolate import ExtrapolatedPath as ExtrapolatedPath
+from ._extrapolate import ExtrapolatedSnapAngles as ExtrapolatedSnapAngles
+from ._extrapolate import refined_scene as refined_scene
+from ._extrapolate import snap_angles_extrapolated as snap_angles_extrapolated

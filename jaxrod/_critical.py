@@ -134,8 +134,10 @@ def _sym_residual(y, scene, parameter, ell):
 
 # ----- Newton with an implicit-derivative final step ------------------------------------
 
-def _newton(res, z0, max_steps, tol_alpha, idx_alpha):
-    """Plain Newton on res(z) = 0 with dense autodiff Jacobians."""
+def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True):
+    """Plain Newton on res(z) = 0 with dense autodiff Jacobians. An inactive call (the
+    system `kind` does not select) takes no step: under `vmap` the loop then runs only as
+    long as the members that need it."""
     jac = jax.jacfwd(res)
 
     def cond(c):
@@ -150,9 +152,10 @@ def _newton(res, z0, max_steps, tol_alpha, idx_alpha):
         done = (jnp.abs(dz[idx_alpha]) < tol_alpha) & (jnp.max(jnp.abs(dz)) < 1e3 * tol_alpha)
         return z, k + 1, done, jnp.max(jnp.abs(r))
 
-    z, k, done, _ = lax.while_loop(cond, body, (z0, jnp.zeros((), jnp.int32), jnp.zeros((), bool),
+    active = jnp.asarray(active, bool)
+    z, k, done, _ = lax.while_loop(cond, body, (z0, jnp.zeros((), jnp.int32), ~active,
                                                 jnp.full((), jnp.inf, z0.dtype)))
-    return z, k, done
+    return z, k, done & active
 
 
 def _implicit_step(res_p, z, jac_z):
@@ -219,15 +222,16 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
             z0 = _sym_pack(theta, force, alpha, mode, vm0)
             unpack = _sym_unpack
             ia = N // 2 + 1
-        z, k, done = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, ia)
+        active = (kind == which) | (len(outs_kinds) == 1)
+        z, k, done = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, ia, active)
         finite = jnp.all(jnp.isfinite(z))
         # The system not selected by `kind` (and a failed one) is singular or non-finite: its
         # derivative step uses the start point and the identity, so that no NaN reaches the
         # gradient of the selected one (a zero cotangent times inf is NaN).
-        active = (kind == which) | (len(outs_kinds) == 1)
         z_use = jnp.where(active & finite, z, z0)
-        J = jax.jacfwd(lambda z: res(z, scene_sg))(z_use)
-        J = jnp.where(active & finite & jnp.all(jnp.isfinite(J)), J, jnp.eye(J.shape[0], dtype=dtype))
+        eye = jnp.eye(z0.shape[0], dtype=dtype)
+        J = lax.cond(active & finite, lambda zu: jax.jacfwd(lambda z: res(z, scene_sg))(zu), lambda zu: eye, z_use)
+        J = jnp.where(active & finite & jnp.all(jnp.isfinite(J)), J, eye)
         r = jnp.max(jnp.abs(res(z, scene_sg)))
         z_imp = _implicit_step(lambda z: res(z, scene), sg(z_use), J)
         z = jnp.where(active & finite, z_imp, z)

@@ -88,17 +88,22 @@ def initial_state(scene, state: str = "up", *, steps: int = 24, solver: Newton =
     """
     if state not in ("up", "down"):
         raise ValueError(f"state must be 'up' or 'down', got {state!r}")
+    return _initial_state(scene, 1.0 if state == "up" else -1.0, steps=steps, solver=solver)
+
+
+def _initial_state(scene, sgn, *, steps: int = 24, solver: Newton = Newton()) -> Equilibrium:
+    """`initial_state` with the side as a number, +1 up or -1 down (may be traced, e.g.
+    `vmap`ped to build both states in one compiled call)."""
     if not solver.minimize:
         raise ValueError("initial_state needs a minimizing Newton solver (minimize=True)")
-    up = state == "up"
     scene = _float_scene(scene)
     dtype = scene_dtype(scene)
-    sgn = 1.0 if up else -1.0
+    sgn = jnp.asarray(sgn, dtype)
     target = lax.stop_gradient(scene)
 
     def run_path(kind):
         s0 = _deformed(target, jnp.zeros((), dtype), jnp.zeros((), dtype))
-        eq0 = solve_equilibrium(s0, buckled_guess(s0, up), solver=solver)
+        eq0 = solve_equilibrium(s0, sgn * buckled_guess(s0, True), solver=solver)
         ok0 = eq0.converged & eq0.stable & (sgn * _fold_height(eq0.theta, eq0.force, s0) > 0)
 
         def step(carry, u):

@@ -38,7 +38,7 @@ from ._critical import critical_point
 from ._energy.geometry import discretize
 from ._energy.lagrangian import positions
 from ._equilibrium import Newton, _float_scene, solve_equilibrium
-from ._initial import initial_state
+from ._initial import _initial_state
 from ._solution import RESULTS, Equilibrium
 from ._stability import mode_parity
 
@@ -230,27 +230,45 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     dtype = jnp.result_type(scene.strip.psi0)
     require_float64(dtype, "snap_angles")
     tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
-    up_eq = initial_state(scene, "up")
-    down_eq = initial_state(scene, "down")
-    down = _path(scene, up_eq, -1.0, parameter, settings, bound, bisections, tol)
-    # start of the snap-up path: the down state at alpha = 0 if it exists, else the
-    # state the snap-down half of the loop reached at its most negative angle.
-    has_down = down_eq.result == RESULTS.successful
-    br = jax.tree.map(lambda x: x[0], down.branch)  # first stage
-    last = br.count - 1
-    alt_lam = br.lam[last]
-    alt_scene = parameter.set(scene, alt_lam)
-    alt_eq = solve_equilibrium(alt_scene, br.theta[last], br.force[last])
-    # (only meaningful when the down path did not snap; otherwise the landing state)
-    land_scene = parameter.set(scene, down.alpha_c - 1e-3)
-    land_eq = solve_equilibrium(land_scene, down.theta_after, down.force_after)
-    start_eq = jax.tree.map(
-        lambda a, b, c: jnp.where(has_down, a, jnp.where(down.snaps, c, b)),
-        eqx.filter(down_eq, eqx.is_array), eqx.filter(alt_eq, eqx.is_array), eqx.filter(land_eq, eqx.is_array),
-    )
-    start_eq = eqx.combine(start_eq, eqx.filter(down_eq, eqx.is_array, inverse=True))
-    up = _path(scene, start_eq, 1.0, parameter, settings, bound, bisections, tol)
-    return SnapAngles(up=_polish(scene_d, up, parameter), down=_polish(scene_d, down, parameter))
+    # both start states in one vmapped call: index 0 up, 1 down
+    starts = jax.vmap(lambda sg: _initial_state(scene, sg))(jnp.array([1.0, -1.0], dtype))
+    pick = lambda tree, i: jax.tree.map(lambda x: x[i], tree)  # noqa: E731
+    up_eq, down_eq = pick(starts, 0), pick(starts, 1)
+    arrays = lambda e: eqx.filter(e, eqx.is_array)  # noqa: E731
+    static = eqx.filter(down_eq, eqx.is_array, inverse=True)
+
+    # The two paths run one after the other through a single traced body (one compiled
+    # copy of the continuation, refinement and landing): first snap down from the up
+    # state, then snap up from the down state; where the down state does not exist at
+    # alpha = 0, snap up starts from the state the snap-down half of the loop reached
+    # (its landing state, or the end of its branch if it did not snap).
+    def body(prev, direction):
+        # prev: what the snap-down path left for the snap-up start (see below)
+        lam_end, t_end, m_end, down_snaps, down_alpha, t_after, m_after = prev
+
+        def up_start():
+            alt_eq = solve_equilibrium(parameter.set(scene, lam_end), t_end, m_end)
+            land_eq = solve_equilibrium(parameter.set(scene, down_alpha - 1e-3), t_after, m_after)
+            return jax.tree.map(lambda c, b: jnp.where(down_snaps, c, b), arrays(land_eq), arrays(alt_eq))
+
+        has_down = down_eq.result == RESULTS.successful
+        need_alt = (direction > 0) & ~has_down
+        alt = lax.cond(need_alt, up_start, lambda: arrays(down_eq))
+        start = jax.tree.map(lambda u, d, a: jnp.where(direction < 0, u, jnp.where(has_down, d, a)),
+                             arrays(up_eq), arrays(down_eq), alt)
+        path = _path(scene, eqx.combine(start, static), direction, parameter, settings, bound, bisections, tol)
+        br = jax.tree.map(lambda x: x[0], path.branch)  # first stage
+        last = br.count - 1
+        nxt = (br.lam[last], br.theta[last], br.force[last], path.snaps, path.alpha_c, path.theta_after,
+               path.force_after)
+        return nxt, _polish(scene_d, path, parameter)
+
+    N = scene.mesh.n
+    z = jnp.zeros((), dtype)
+    init = (z, jnp.zeros(N, dtype), jnp.zeros(2, dtype), jnp.zeros((), bool), z, jnp.zeros(N, dtype),
+            jnp.zeros(2, dtype))
+    _, paths = lax.scan(body, init, jnp.array([-1.0, 1.0], dtype))
+    return SnapAngles(up=pick(paths, 1), down=pick(paths, 0))
 
 
 def _polish(scene_d, path, parameter):

@@ -82,11 +82,12 @@ def test_cli_snap_angles_json(snap, capsys):
 
     from jaxrod._cli import main
 
-    assert main(["snap-angles", "--psi0", "60", "--gap", "0.5", "--json"]) == 0
+    assert main(["snap-angles", "--psi0", "60", "--gap", "0.5", "--json", "--no-extrapolate"]) == 0
     rec = json.loads(capsys.readouterr().out)
     r = snap(60.0, 0.5)
     assert abs(rec["alpha_c_up_deg"] - np.degrees(float(r.up.alpha_c))) < 1e-9
     assert abs(rec["alpha_c_down_deg"] - np.degrees(float(r.down.alpha_c))) < 1e-9
+    assert rec["extrapolated"] is False
     assert rec["kind_up"] in ("fold", "branch_point") and rec["kind_down"] in ("fold", "branch_point")
     assert main(["snap-angles", "--psi0", "30", "--gap", "0.8", "--json"]) == 0
     rec = json.loads(capsys.readouterr().out)
