@@ -9,6 +9,14 @@ import os
 # solve took 30x longer with the default thread count. One thread unless the user chose
 # (this has an effect only if scipy's OpenBLAS is not loaded yet).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# XLA:CPU can deadlock when a batched LAPACK kernel (a vmapped dense solve: jaxlib's
+# ParallelBatchMap on the intra-op Eigen pool) runs inside a while loop that itself runs on
+# that pool: with 2 cores the phase diagram (vmapped snap_angles) hung forever, every
+# thread waiting (cf. PyAutoFit issues 1528/1530). A single-threaded Eigen pool avoids it
+# and costs nothing measurable here (snap_angles at N = 100: 72 ms with, 76 ms without).
+# XLA_FLAGS is read when the CPU backend starts, i.e. at the first computation.
+if "xla_cpu_multi_thread_eigen" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false").strip()
 
 from ._continuation import AbstractParameter as AbstractParameter
 from ._continuation import Branch as Branch

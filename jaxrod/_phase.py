@@ -2,10 +2,16 @@ r"""Phase diagram of the snap angles (paper Fig. 2c): $\alpha_{c,\rm up}$ and
 $\alpha_{c,\rm down}$ of [`jaxrod.snap_angles`][] over a grid of fold angles $\Psi_0$ and
 gaps $G/L$ (symmetric actuation, $\alpha_L=\alpha_R=\alpha$, conventions of MODEL.md).
 
-One chunk per $\Psi_0$: a single jitted call `vmap`ped over the gaps. $\Psi_0$ and the
-gaps are traced, so every chunk reuses one compilation (per mesh and grid length).
-Under `vmap` each member keeps its own result code: a gap where a state does not exist
-gives NaN angles there and does not affect the others.
+One chunk per $\Psi_0$: a single jitted call that maps `snap_angles` over the gaps with
+`lax.map` (one gap after the other inside the compiled call). $\Psi_0$ and the gaps are
+traced, so every chunk reuses one compilation (per mesh and grid length). Each gap keeps
+its own result code: a gap where a state does not exist gives NaN angles there and does
+not affect the others.
+
+Why not `vmap`: batched, the loops of every member run as long as the slowest one, and on
+XLA:CPU the batched LAPACK kernels inside them (jaxlib's `ParallelBatchMap` for the
+tridiagonal and dense solves) deadlocked on a 2-core machine (every thread waiting; seen
+with 9 and 41 gaps, not with 3). Sequentially the 5 x 41 grid takes ~15 s at N = 100.
 
 With `out`, each finished chunk is written to `out/chunks/psi0_<deg>.nc` (NetCDF3 via
 scipy) and the run is resumable: a chunk whose file exists with the same grid, $s_0$
@@ -34,7 +40,7 @@ VARIABLES = ("alpha_c_up", "alpha_c_down", "kind_up", "kind_down", "fold_height_
 
 @eqx.filter_jit
 def _chunk(psi0, gaps, s0, mesh):
-    """All gaps at one fold angle (rad): one vmapped `snap_angles`."""
+    """All gaps at one fold angle (rad): `snap_angles` mapped over the gaps (`lax.map`)."""
 
     def one(g):
         r = snap_angles(Scene(Strip(psi0=psi0, s0=s0), Clamps(g), mesh))
@@ -47,7 +53,7 @@ def _chunk(psi0, gaps, s0, mesh):
             out[f"start_{name}"] = p.result._value.astype(jnp.int32)
         return out
 
-    return jax.vmap(one)(gaps)
+    return jax.lax.map(one, gaps)
 
 
 def _attrs(gaps, s0, n, refine):
