@@ -3,7 +3,7 @@ r"""Snap angles extrapolated to the continuum: Richardson extrapolation on two m
 The discrete rod is second-order accurate: at a fixed mesh family (uniform, or the same
 grading), $\alpha_c(N)=\alpha_c^\ast+c\,N^{-2}+O(N^{-4})$; the measured order is 2.00 at
 every point of `benchmarks/results/convergence_alpha_c.md`. At the default $N=100$ the
-mesh error is up to 0.14 deg ($s_0=0.02$). From $N$ and $2N$,
+mesh error is up to 0.17 deg ($s_0=0.02$). From $N$ and $2N$,
 
 $$\alpha_R=\alpha_{2N}+\frac{\alpha_{2N}-\alpha_N}{2^2-1},\qquad
 \varepsilon=\frac{|\alpha_{2N}-\alpha_N|}{3},$$

@@ -110,26 +110,57 @@ def test_paper_facts(snap):
     assert 0 < float(r.up.alpha_c) < abs(float(r.down.alpha_c))
 
 
-@pytest.mark.parametrize("psi0, gap", [(60.0, 0.5), (90.0, 0.3), (180.0, 0.5), (120.0, 0.7)])
-def test_no_missed_instability_dense(snap, psi0, gap):
-    """Independent stability check: dense eigenvalues of the reduced Hessian at every
-    point of the walked branch are positive before alpha_c and one is negative after."""
-    r = snap(psi0, gap)
-    sc = jr.make_scene(psi0, gap, 0.0)
+@eqx.filter_jit
+def _dense_min_eig(sc, theta, force, lam, lam_mid):
+    """Smallest dense eigenvalue of the reduced Hessian at branch point `lam` and, solved
+    afresh by plain Newton from there, at the parameter `lam_mid` between two points."""
+    def at(a):
+        return eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), sc, (a, a))
+
+    eq = jr.Equilibrium(theta, force, jr.RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32),
+                        at(lam))
+    mid = jr.solve_equilibrium(at(lam_mid), theta, force, solver=jr.Newton(minimize=False))
+    e0 = jnp.linalg.eigvalsh(jr.dense_reduced_hessian(eq))[0]
+    e1 = jnp.linalg.eigvalsh(jr.dense_reduced_hessian(mid))[0]
+    return e0, e1, mid.result == jr.RESULTS.successful
+
+
+def _check_no_missed_instability(r, sc):
+    """Independent of the Sturm counts: dense eigenvalues at every point of the walked branch
+    are positive before alpha_c and one is negative after; so are those at the midpoint
+    between consecutive stable points (an eigenvalue dipping below zero within one step
+    would show there)."""
     for path in (r.up, r.down):
         b = jax.tree.map(lambda x: np.asarray(x[0]), path.branch)
-        mins = []
-        for i in range(int(b.count)):
-            s = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), sc,
-                            (jnp.asarray(b.lam[i]), jnp.asarray(b.lam[i])))
-            eq = jr.Equilibrium(jnp.asarray(b.theta[i]), jnp.asarray(b.force[i]), jr.RESULTS.successful,
-                                jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), s)
-            mins.append(float(np.linalg.eigvalsh(np.asarray(jr.dense_reduced_hessian(eq)))[0]))
+        n = int(b.count)
+        mins, mids = [], []
+        for i in range(n):
+            nxt = b.lam[min(i + 1, n - 1)]
+            e0, e1, ok = _dense_min_eig(sc, jnp.asarray(b.theta[i]), jnp.asarray(b.force[i]),
+                                        jnp.asarray(b.lam[i]), jnp.asarray(0.5 * (b.lam[i] + nxt)))
+            mins.append(float(e0))
+            if i < n - 2 or (i == n - 2 and not bool(path.snaps)):
+                assert bool(ok), (i, b.lam[i])
+                mids.append(float(e1))
         mins = np.array(mins)
         if bool(path.snaps):
             assert np.all(mins[:-1] > 0) and mins[-1] < 0, mins
         else:
-            assert np.all(mins > 0)
+            assert np.all(mins > 0), mins
+        assert np.all(np.array(mids) > 0), mids
+
+
+@pytest.mark.parametrize("psi0, gap", [(60.0, 0.5), (90.0, 0.3), (180.0, 0.5), (120.0, 0.7), (30.0, 0.62)])
+def test_no_missed_instability_dense(snap, psi0, gap):
+    _check_no_missed_instability(snap(psi0, gap), jr.make_scene(psi0, gap, 0.0))
+
+
+@pytest.mark.slow
+def test_no_missed_instability_on_the_phase_diagram_grid(snap):
+    """The same check at every point of the phase-diagram grid (5 Psi0 x 41 gaps, N = 100)."""
+    for psi0 in (30.0, 60.0, 90.0, 120.0, 180.0):
+        for gap in np.round(np.arange(0.1, 0.9 + 1e-9, 0.02), 10):
+            _check_no_missed_instability(snap(psi0, float(gap)), jr.make_scene(psi0, float(gap), 0.0))
 
 
 @pytest.mark.parametrize("psi0, gap, s0", [(60.0, 0.05, 0.02), (60.0, 0.95, 0.02), (10.0, 0.5, 0.02),

@@ -81,7 +81,7 @@ def test_bad_member_fails_alone(down, bad_gap):
         assert_same(eb, i, one(jnp.asarray(P[i]), down.scene, down.theta, down.force))
     # the failure does not depend on being batched
     es = one(jnp.asarray(P[2]), down.scene, down.theta, down.force)
-    assert es.result == bad
+    assert int(es.result._value) == int(np.asarray(eb.result._value)[2])
 
 
 def test_no_recompilation_across_parameter_values(down):
