@@ -223,6 +223,10 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     The clamp angles of `scene` are ignored (the loop starts at $\alpha=0$). A path that
     reaches $|\alpha|=$`bound` without losing stability does not snap (`snaps=False`,
     `alpha_c=NaN`, kind "none").
+
+    The angles are those of the scene's mesh: second-order accurate, off by up to 0.17 deg
+    at N = 100 ($s_0=0.02$). For the continuum value use
+    [`jaxrod.snap_angles_extrapolated`][] (Richardson from $N$ and $2N$, ~1e-5 deg).
     """
     parameter = SymmetricAlpha()
     scene_d = parameter.set(_float_scene(scene), 0.0)  # carries gradients to the refinement

@@ -43,4 +43,8 @@ def test_reproduce_quick_writes_report(tmp_path, capsys):
     res = json.loads((tmp_path / "results.json").read_text())
     rows = res["sections"]["No snap at Psi0 = 30 deg, G/L = 0.8"]["rows"]
     assert rows[0][2] == "none"
+    # snap angles extrapolated from N = 60 and 120 vs Richardson(400, 800) of benchmarks/results/snap.md
+    rows = res["sections"]["Snap angles at Psi0 = 60 deg, G/L = 0.5"]["rows"]
+    assert abs(float(rows[0][2].split()[0]) - 77.41038) < 0.01, rows[0]
+    assert abs(float(rows[1][2].split()[0]) + 82.94718) < 0.01, rows[1]
     assert (tmp_path / "master_curves.png").stat().st_size > 1000
