@@ -234,8 +234,10 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     dtype = jnp.result_type(scene.strip.psi0)
     require_float64(dtype, "snap_angles")
     tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
-    # both start states in one vmapped call: index 0 up, 1 down
-    starts = jax.vmap(lambda sg: _initial_state(scene, sg))(jnp.array([1.0, -1.0], dtype))
+    # both start states through one traced body (index 0 up, 1 down), one after the other:
+    # `lax.map`, not `vmap`, which would batch the LAPACK kernels inside the Newton loops
+    # (see `_phase.py` for the XLA:CPU deadlock that batching caused)
+    starts = lax.map(lambda sg: _initial_state(scene, sg), jnp.array([1.0, -1.0], dtype))
     pick = lambda tree, i: jax.tree.map(lambda x: x[i], tree)  # noqa: E731
     up_eq, down_eq = pick(starts, 0), pick(starts, 1)
     arrays = lambda e: eqx.filter(e, eqx.is_array)  # noqa: E731
