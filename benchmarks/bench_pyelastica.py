@@ -59,6 +59,8 @@ from jaxrod._energy.geometry import discretize  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
+sys.path.insert(0, str(HERE))
+from bench_dynamics import time_simulate  # noqa: E402  (the jaxrod timing of both dynamics benchmarks)
 
 
 # ----------------------------------------------------------------------------------------
@@ -289,18 +291,7 @@ def run_pyelastica(scene, theta_init, alpha0, rate, *, dt, t_max, radius, filter
 # ----------------------------------------------------------------------------------------
 
 def run_jaxrod(start, tol, t1, n_fine, repeats):
-    kw = dict(direction=start.direction, t1=t1, rtol=tol, atol=tol, n_fine=n_fine, max_steps=2_000_000)
-    t0 = time.perf_counter()
-    tr = jr.simulate(start.scene, start.theta0, start.protocol, **kw)
-    jax.block_until_ready(tr.v_s)
-    first = time.perf_counter() - t0
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        tr = jr.simulate(start.scene, start.theta0, start.protocol, **kw)
-        jax.block_until_ready(tr.v_s)
-        times.append(time.perf_counter() - t0)
-    wall = float(np.median(times)) if times else first
+    tr, wall, first = time_simulate(start, repeats, t1=t1, rtol=tol, atol=tol, n_fine=n_fine)
     return dict(tol=tol, v_s=float(tr.v_s), t_cross=float(tr.t_cross), t_end=float(tr.t_end),
                 steps=int(tr.num_steps), wall_s=wall, compile_s=max(first - wall, 0.0),
                 energy_drift=float(tr.energy_drift), snapped=bool(tr.snapped), n_fine=n_fine, t1=t1)

@@ -43,20 +43,25 @@ class _Cache:
         return self.data[key]
 
 
-def _snap_record(psi0_deg, gap, n, s0=0.02):
-    import jax.numpy as jnp
+def _deg(x):
+    """Radians (array) to degrees, None where not finite (no snap)."""
+    x = float(x)
+    return math.degrees(x) if math.isfinite(x) else None
 
-    import jaxrod as jr
+
+def _scene(psi0_deg, gap, n, s0):
+    import jax.numpy as jnp
 
     from ._critical import design_scene
 
-    r = jr.snap_angles(design_scene(jnp.deg2rad(psi0_deg), gap, s0, n))
+    return design_scene(jnp.deg2rad(psi0_deg), gap, s0, n)
 
-    def v(x):
-        x = float(x)
-        return math.degrees(x) if math.isfinite(x) else None
 
-    return {"alpha_up": v(r.up.alpha_c), "alpha_down": v(r.down.alpha_c),
+def _snap_record(psi0_deg, gap, n, s0=0.02):
+    import jaxrod as jr
+
+    r = jr.snap_angles(_scene(psi0_deg, gap, n, s0))
+    return {"alpha_up": _deg(r.up.alpha_c), "alpha_down": _deg(r.down.alpha_c),
             "kind_up": jr.KIND_NAMES[int(r.up.kind)], "kind_down": jr.KIND_NAMES[int(r.down.kind)],
             "start_up": str(jr.RESULTS[r.up.result] or "successful"),
             "start_down": str(jr.RESULTS[r.down.result] or "successful")}
@@ -67,21 +72,12 @@ def _fmt(x, spec="+.2f"):
 
 
 def _extrapolated_record(psi0_deg, gap, n, s0=0.02):
-    import jax.numpy as jnp
-
     import jaxrod as jr
 
-    from ._critical import design_scene
-
-    x = jr.snap_angles_extrapolated(design_scene(jnp.deg2rad(psi0_deg), gap, s0, n))
-
-    def v(a):
-        a = float(a)
-        return math.degrees(a) if math.isfinite(a) else None
-
-    return {"alpha_up": v(x.up.alpha_c), "alpha_down": v(x.down.alpha_c),
-            "error_up": v(x.up.error), "error_down": v(x.down.error),
-            "alpha_up_mesh": v(x.up.alpha_c_coarse), "alpha_down_mesh": v(x.down.alpha_c_coarse),
+    x = jr.snap_angles_extrapolated(_scene(psi0_deg, gap, n, s0))
+    return {"alpha_up": _deg(x.up.alpha_c), "alpha_down": _deg(x.down.alpha_c),
+            "error_up": _deg(x.up.error), "error_down": _deg(x.down.error),
+            "alpha_up_mesh": _deg(x.up.alpha_c_coarse), "alpha_down_mesh": _deg(x.down.alpha_c_coarse),
             "kind_up": jr.KIND_NAMES[int(x.up.kind)], "kind_down": jr.KIND_NAMES[int(x.down.kind)]}
 
 
@@ -175,13 +171,9 @@ section_speed_plane = _dynamics_section(
 
 
 def _vs_record(psi0_deg, gap, n):
-    import jax.numpy as jnp
-
     import jaxrod as jr
 
-    from ._critical import design_scene
-
-    start, tr = jr.snap_dynamics(design_scene(jnp.deg2rad(psi0_deg), gap, 0.02, n), "up", kind="brink")
+    start, tr = jr.snap_dynamics(_scene(psi0_deg, gap, n, 0.02), "up", kind="brink")
     return {"v_s": float(tr.v_s), "snapped": bool(tr.snapped), "energy_drift": float(tr.energy_drift)}
 
 

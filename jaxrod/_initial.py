@@ -93,7 +93,7 @@ def initial_state(scene, state: str = "up", *, steps: int = 24, solver: Newton =
 
 def _initial_state(scene, sgn, *, steps: int = 24, solver: Newton = Newton()) -> Equilibrium:
     """`initial_state` with the side as a number, +1 up or -1 down (may be traced, e.g.
-    `vmap`ped to build both states in one compiled call)."""
+    mapped with `lax.map` to build both states through one traced body)."""
     if not solver.minimize:
         raise ValueError("initial_state needs a minimizing Newton solver (minimize=True)")
     scene = _float_scene(scene)
