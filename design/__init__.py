@@ -32,3 +32,6 @@ from ._studies import snap_angle_study as snap_angle_study
 from ._studies import snap_speed_study as snap_speed_study
 from ._studies import StudyResult as StudyResult
 from ._studies import verify_snap_angles as verify_snap_angles
+from ._studies import SpeedStudyResult as SpeedStudyResult
+from ._studies import SpeedVerification as SpeedVerification
+from ._studies import verify_snap_speed as verify_snap_speed

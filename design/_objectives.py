@@ -147,27 +147,42 @@ class Snaps(Term):
 
 def dynamics_available():
     """Whether design can use a snap-speed objective: needs `jaxrod.snap_speed`, a
-    differentiable v_s of a design. (`jaxrod.snap_dynamics` exists since issue 4 but is not
-    yet wired into design: the speed objectives and studies (b)-(d) still refuse.)"""
+    differentiable v_s of a design."""
     return hasattr(jr, "snap_speed")
 
 
+_SPEED_OPTIONS = {"nudge", "past", "dt", "t1", "n_fine", "solver", "max_drift"}
+
+
 class SnapSpeed(Term):
+    """The snapping speed v_s / v* of the `direction` snap ([`jaxrod.snap_speed`][]).
+    Default `tol` 1 % of the target. `options`: keyword arguments of `jaxrod.snap_speed`."""
+
     name = "snap_speed"
     unit = "v*"
+    direction: str = eqx.field(static=True)
+    options: tuple = eqx.field(static=True)
 
-    def __init__(self, target, tol=0.1, weight=1.0):
+    def __init__(self, target, tol=None, weight=1.0, direction="up", **options):
         if not dynamics_available():
-            raise NotImplementedError("snap_speed: the snapping-speed objective needs a differentiable v_s from "
-                                      "jaxrod's dynamics; jaxrod.snap_dynamics exists but is not wired into "
-                                      "design yet" if hasattr(jr, "snap_dynamics") else
-                                      "snap_speed: the snapping-speed objective needs jaxrod's dynamics API, "
-                                      "which is not available yet")
+            raise NotImplementedError("snap_speed: the snapping-speed objective needs jaxrod.snap_speed "
+                                      "(jaxrod's dynamics), which is not available")
+        if tol is None and isinstance(target, (int, float)) and math.isfinite(target):
+            tol = 0.01 * abs(target) if target != 0 else 0.1
         _check(target, tol, weight)
+        unknown = set(options) - _SPEED_OPTIONS
+        if unknown:
+            raise ValueError(f"options: unknown snap_speed option(s) {sorted(unknown)} "
+                             f"(choose from {sorted(_SPEED_OPTIONS)})")
+        self.direction = _state_name(direction)
+        self.options = tuple(sorted(options.items()))
         self.target, self.tol, self.weight = float(target), float(tol), float(weight)
 
-    def value(self, ctx):  # pragma: no cover - enabled when the dynamics API lands
-        return jr.snap_speed(ctx.scene)
+    def value(self, ctx):
+        return ctx.snap_speed(self.direction, self.options)
+
+    def describe(self):
+        return {**super().describe(), "direction": self.direction, "options": dict(self.options)}
 
 
 class Context:
@@ -179,6 +194,13 @@ class Context:
         self.scene = design_scene(psi0, gap, s0, n)
         self._critical = None
         self._eq = {}
+        self._speed = {}
+
+    def snap_speed(self, direction, options):
+        key = (direction, options)
+        if key not in self._speed:
+            self._speed[key] = jr.snap_speed(self.scene, direction, **dict(options))
+        return self._speed[key]
 
     @property
     def critical(self):

@@ -4,10 +4,19 @@ r"""Design studies (issue 5), each a function returning a result with an indepen
     targets (default 60 and -70 deg), $s_0 = 0.02$. Multi-start Levenberg-Marquardt on a coarse
     mesh, the best design refined on the design mesh, then re-checked by an independent
     forward solve (`jaxrod.snap_angles`, no gradients) on a finer mesh.
-(b) `fastest_snap_study` (max $v_s$ s.t. $G/L\ge0.3$), (c) `snap_speed_study` ($v_s = 20 v^*$ at
-    $\Psi_0 = 90^\circ$) and (d) `actuator_study` (left half, right half, both: the paper's
-    Fig. 4) need jaxrod's snap dynamics (issue 4); until it exists they raise
-    `NotImplementedError` naming what is missing.
+(b) `fastest_snap_study`: maximize the snapping speed $v_s/v^\*$ over $(\Psi_0, G/L)$ subject
+    to $G/L\ge$ `min_gap` (default 0.3; the feasible parametrization keeps every iterate
+    inside), $s_0 = 0.02$.
+(c) `snap_speed_study`: the gap (and $s_0$ if freed) with $v_s = $ `target_speed` (default
+    $20 v^\*$) at $\Psi_0 = $ `psi0_deg` (default 90 deg).
+    Both use [`jaxrod.snap_speed`][] (the brink snap, fixed-step dynamics, differentiable)
+    on the design mesh `n`, Levenberg-Marquardt from each start in turn (one compiled
+    problem; starts are not `vmap`-ed: batched LAPACK kernels inside the solvers' while
+    loops can deadlock XLA:CPU), then re-check the design by an independent forward solve
+    (`verify_snap_speed`: `jaxrod.snap_dynamics`, the brink scene of `jaxrod.brink` with its
+    own nudge, adaptive Dopri8 at tight tolerance, on the finer mesh `n_check`).
+(d) `actuator_study` (left half, right half, both: the paper's Fig. 4) is not wired here
+    (see `design/_actuator.py`).
 """
 
 from __future__ import annotations
@@ -22,7 +31,7 @@ import numpy as np
 import jaxrod as jr
 
 from ._critical import design_scene
-from ._objectives import AlphaDown, AlphaUp, dynamics_available
+from ._objectives import AlphaDown, AlphaUp, SnapSpeed, dynamics_available
 from ._optimize import DesignResult, MultiStartResult, optimize
 from ._params import Parametrization
 
@@ -84,16 +93,199 @@ def _needs_dynamics(what):
                                   "(issue 4); not available yet in design")
 
 
-def fastest_snap_study(min_gap=0.3, **kwargs):
-    """Study (b): maximize the snapping speed v_s / v* subject to G/L >= `min_gap`."""
-    _needs_dynamics("fastest_snap_study")
-    raise NotImplementedError("fastest_snap_study: dynamics API present but not wired yet")  # pragma: no cover
+@dataclasses.dataclass
+class SpeedVerification:
+    """An independent forward check of a design's snapping speed: `v_s` of
+    `jaxrod.snap_dynamics` (brink, `solver` adaptive at `rtol` = atol) on `n` segments,
+    compared with `reference` (the target for study (c), the design-mesh value for (b));
+    `error` = |v_s - reference| / |reference|; `reached` = error <= `tol` and it snapped."""
+
+    n: int
+    v_s: float
+    reference: float
+    error: float
+    tol: float
+    reached: bool
+    solver: str
+    rtol: float
+    num_steps: int
+    wall_time: float
+
+    def to_dict(self):
+        return {k: (v if not isinstance(v, float) or math.isfinite(v) else None)
+                for k, v in dataclasses.asdict(self).items()}
 
 
-def snap_speed_study(target_speed=20.0, psi0_deg=90.0, **kwargs):
-    """Study (c): the gap (and s0) with v_s = `target_speed` v* at Psi0 = `psi0_deg`."""
+def verify_snap_speed(psi0_deg, gap, s0, n, reference, *, tol=0.01, direction="up", solver="dopri8",
+                      rtol=1e-9, t1=3.0) -> SpeedVerification:
+    """Re-solve the snap of design (psi0_deg, gap, s0) by `jaxrod.snap_dynamics` (brink
+    scene, its default nudge, adaptive `solver` at rtol = atol = `rtol`) on `n` segments and
+    compare its v_s with `reference` (relative `tol`). No gradients, no fixed step."""
+    import time
+
+    t0 = time.perf_counter()
+    sc = design_scene(math.radians(psi0_deg), gap, s0, n)
+    try:
+        _, tr = jr.snap_dynamics(sc, direction, solver=solver, rtol=rtol, atol=rtol, t1=t1, max_steps=1_000_000)
+        import diffrax as dfx
+
+        solved = bool((tr.result == dfx.RESULTS.successful) | (tr.result == dfx.RESULTS.event_occurred))
+        v, ok, steps = float(tr.v_s), bool(tr.snapped) and solved, int(tr.num_steps)
+    except ValueError:  # the path does not snap: no brink
+        v, ok, steps = math.nan, False, 0
+    err = abs(v - reference) / abs(reference) if math.isfinite(v) and reference else math.nan
+    return SpeedVerification(n, v, float(reference), err, tol, bool(ok and err <= tol), solver, rtol, steps,
+                             time.perf_counter() - t0)
+
+
+@dataclasses.dataclass
+class SpeedStudyResult:
+    """Result of study (b) or (c): `design` (the best [`DesignResult`][] on the design mesh;
+    its `achieved[0]` is v_s / v*), `verification` (a [`SpeedVerification`][] on the finer
+    mesh), `runs` (one [`MultiStartResult`][] per start), `study` ("b" or "c"), `v_s`
+    (the design's speed on the design mesh), `v_s_start` ((b): at the best start),
+    `start_miss` ((c): |v_s - target| at the best start), `min_gap` ((b) only), `wall_time`
+    (s, optimization and check)."""
+
+    study: str
+    design: DesignResult
+    verification: SpeedVerification
+    runs: tuple
+    v_s: float
+    v_s_start: float
+    wall_time: float
+    min_gap: float | None = None
+    start_miss: float | None = None
+
+    @property
+    def reached(self):
+        """(c): the target is met on the design mesh and by the independent check.
+        (b): the speed improved on the start, the bound holds and the check agrees."""
+        if self.study == "c":
+            return bool(self.design.reached) and self.verification.reached
+        return self.improved and self.bound_respected and self.verification.reached
+
+    @property
+    def improved(self):
+        return bool(math.isfinite(self.v_s) and self.v_s > self.v_s_start)
+
+    @property
+    def bound_respected(self):
+        return self.min_gap is None or self.design.gap >= self.min_gap
+
+    @property
+    def at_bound(self):
+        """(b): the optimum is at the gap bound (within 1e-3 L)."""
+        return self.min_gap is not None and self.design.gap - self.min_gap < 1e-3
+
+    @property
+    def message(self):
+        v = self.verification
+        chk = (f"check at N = {v.n}: v_s = {v.v_s:.4f} v* ({v.solver} {v.rtol:g}), "
+               f"{'within' if v.reached else 'NOT within'} {100 * v.tol:g} % of {v.reference:.4f}")
+        if self.study == "c":
+            head = "target reached" if self.reached else (
+                "target not reached: " + (self.design.message if not bool(self.design.reached)
+                                         else "the finer-mesh check disagrees"))
+            return f"{head}; {chk}"
+        head = (f"fastest snap found: v_s = {self.v_s:.4f} v* (start {self.v_s_start:.4f}), "
+                f"G/L = {self.design.gap:.5f} (bound {self.min_gap:g}{', active' if self.at_bound else ''}), "
+                f"Psi0 = {self.design.psi0_deg:.3f} deg, stopped: {self.design.status}")
+        if not self.improved:
+            head = "no improvement on the start: " + head
+        return f"{head}; {chk}"
+
+    def to_dict(self):
+        d = self.design.to_dict()
+        d.update({"study": self.study, "v_s": self.v_s, "v_s_start": self.v_s_start, "reached": self.reached,
+                  "design_reached": bool(self.design.reached), "message": self.message,
+                  "verification": self.verification.to_dict(), "wall_time_s": self.wall_time,
+                  "num_starts": len(self.runs), "start_miss": self.start_miss})
+        if self.study == "b":
+            d.update({"min_gap": self.min_gap, "improved": self.improved, "at_bound": self.at_bound,
+                      "bound_respected": self.bound_respected})
+            for k in ("snap_speed", "target_snap_speed"):
+                d.pop(k, None)
+        return d
+
+
+def _run_starts(terms, param, starts, n, max_iter, progress, meta):
+    """`optimize` from each start in turn (B = 1 each: one compiled problem, no vmap over
+    the dynamics). Returns (best MultiStartResult, all)."""
+    runs = []
+    for vals in starts:
+        z0 = param.from_values(**vals)
+        runs.append(optimize(terms, param, z0, n=n, max_iter=max_iter, progress=progress, meta=meta))
+
+    def key(r):
+        loss = float(r.best.loss)
+        return (not bool(r.best.reached), loss if math.isfinite(loss) else math.inf)
+
+    return min(runs, key=key), tuple(runs)
+
+
+def _speed_of(run):
+    """v_s of the best start's final design (design mesh)."""
+    return float(np.asarray(run.best.achieved)[0])
+
+
+def snap_speed_study(target_speed=20.0, psi0_deg=90.0, *, s0=0.02, free_s0=False, bounds=None, gaps=(0.5,),
+                     n=64, n_check=128, tol=0.01, max_iter=20, check_rtol=1e-9, progress=True,
+                     **speed_options) -> SpeedStudyResult:
+    """Study (c): the gap G/L (and s0 with `free_s0`) at which the snap up of a strip with
+    fold angle `psi0_deg` has v_s = `target_speed` v* (relative tolerance `tol`, 1 %).
+
+    Levenberg-Marquardt from each start gap in `gaps` on the design mesh `n` (default
+    bounds G/L in (0.05, 0.95), s0 in (0.005, 0.1)), stopping at 0.1 `tol`; the best design
+    is re-checked on `n_check` segments by `verify_snap_speed`. A target no design in the
+    bounds reaches ends with the closest design found and `reached = False` ("target not
+    reached")."""
     _needs_dynamics("snap_speed_study")
-    raise NotImplementedError("snap_speed_study: dynamics API present but not wired yet")  # pragma: no cover
+    import time
+
+    t0 = time.perf_counter()
+    free = ("gap",) + (("s0",) if free_s0 else ())
+    param = Parametrization(free=free, bounds=bounds, fixed={"psi0_deg": psi0_deg, "s0": s0})
+    term = SnapSpeed(target_speed, tol=tol * abs(target_speed), **speed_options)
+    starts = [{"gap": float(g), "s0": s0} for g in gaps]
+    best, runs = _run_starts((term,), param, starts, n, max_iter, progress, {"study": "c"})
+    d = best.best
+    v = _speed_of(best)
+    chk = verify_snap_speed(d.psi0_deg, d.gap, d.s0, n_check, target_speed, tol=tol, rtol=check_rtol)
+    # the start's |v_s - target| from its loss (0.5 r^2, r = (v_s - target) / tol); its sign is not kept
+    miss0 = term.tol * math.sqrt(2.0 * float(d.history_loss[0]))
+    return SpeedStudyResult("c", d, chk, runs, v, math.nan, time.perf_counter() - t0, start_miss=miss0)
+
+
+def fastest_snap_study(min_gap=0.3, *, s0=0.02, psi0_bounds=(10.0, 180.0), max_gap=0.95,
+                       starts=((90.0, 0.5),), goal=100.0, n=64, n_check=128, max_iter=20, check_rtol=1e-9,
+                       progress=True, **speed_options) -> SpeedStudyResult:
+    """Study (b): maximize v_s / v* of the snap up over (Psi0, G/L), G/L in (`min_gap`,
+    `max_gap`), Psi0 in `psi0_bounds` (degrees), s0 fixed.
+
+    Maximization as least squares toward an unreachable `goal` (default 100 v*, 2.3 times
+    the paper's G/L = 0 intercept 42.6 v*): Levenberg-Marquardt on (v_s - goal)^2 only
+    ascends v_s while v_s < goal. The sigmoid parametrization never reaches a bound, it
+    approaches it (gap -> min_gap as z -> -inf); `at_bound` reports an optimum within
+    1e-3 of the gap bound. The run stops when stationary, without descent or after
+    `max_iter`; the best design is re-checked on `n_check` segments."""
+    _needs_dynamics("fastest_snap_study")
+    import time
+
+    if not (isinstance(min_gap, (int, float)) and 0.0 <= min_gap < max_gap <= 1.0):
+        raise ValueError(f"min_gap: must satisfy 0 <= min_gap < max_gap <= 1, got {min_gap!r}")
+    t0 = time.perf_counter()
+    param = Parametrization(free=("psi0_deg", "gap"),
+                            bounds={"psi0_deg": tuple(psi0_bounds), "gap": (float(min_gap), float(max_gap))},
+                            fixed={"s0": s0})
+    term = SnapSpeed(goal, tol=1.0, **speed_options)
+    st = [{"psi0_deg": float(p), "gap": float(g)} for p, g in starts]
+    best, runs = _run_starts((term,), param, st, n, max_iter, progress, {"study": "b", "min_gap": min_gap})
+    d = best.best
+    v = _speed_of(best)
+    v0 = goal - math.sqrt(2.0 * float(best.best.history_loss[0]))
+    chk = verify_snap_speed(d.psi0_deg, d.gap, d.s0, n_check, v, tol=0.01, rtol=check_rtol)
+    return SpeedStudyResult("b", d, chk, runs, v, v0, time.perf_counter() - t0, float(min_gap))
 
 
 def actuator_study(**kwargs):

@@ -79,6 +79,7 @@ from ._dynamics import Protocol as Protocol
 from ._dynamics_scenes import brink as brink
 from ._dynamics_scenes import ramp as ramp
 from ._dynamics_scenes import snap_dynamics as snap_dynamics
+from ._snap_speed import snap_speed as snap_speed
 from ._dynamics_scenes import Start as Start
 from ._dynamics_solve import simulate as simulate
 from ._dynamics_solve import Trajectory as Trajectory

@@ -1,4 +1,5 @@
-"""Design subcommands: `jaxrod design` (inverse design of snap angles) and
+"""Design subcommands: `jaxrod design` (inverse design of snap angles or of the snapping
+speed, `--target-speed`) and
 `jaxrod reproduce` (the paper's numbers beside jaxrod's, Markdown report + figures).
 
 Each module in `jaxrod._cli._COMMAND_MODULES` defines `register(sub)`, which adds its
@@ -42,13 +43,80 @@ def _finite_or_none(x):
     return x if math.isfinite(x) else None
 
 
+def _cmd_design_speed(args):
+    """`--target-speed`: study (c), the gap (and s0 with --free-s0) with v_s = target at --psi0."""
+    angle_targets = (args.target_alpha_up, args.target_alpha_down, args.target_hysteresis)
+    if any(t is not None for t in angle_targets):
+        raise InputError("target-speed: cannot be combined with angle targets (--target-alpha-up/-down, "
+                         "--target-hysteresis); design one or the other")
+    v = args.target_speed
+    if not math.isfinite(v) or v <= 0:
+        raise InputError(f"target-speed: must be a finite number > 0 (v_s / v*), got {v}")
+    psi0 = 90.0 if args.psi0 is None else args.psi0
+    if not math.isfinite(psi0) or not 0 < psi0 <= 180:
+        raise InputError(f"psi0: must be in (0, 180] degrees, got {psi0}")
+    tol = args.speed_tol
+    if not math.isfinite(tol) or not 0 < tol < 1:
+        raise InputError(f"speed-tol: must be a relative tolerance in (0, 1), got {tol}")
+    n = 48 if args.n is None else args.n
+    if n < 8 or n % 2:
+        raise InputError(f"n: must be an even integer >= 8, got {n}")
+    n_check = 2 * n if args.check_n is None else args.check_n
+    if n_check < 8 or n_check % 2 or n_check <= n:
+        raise InputError(f"check-n: must be an even integer > n = {n}, got {n_check}")
+    starts = 1 if args.starts is None else args.starts
+    if starts < 1:
+        raise InputError(f"starts: must be >= 1, got {starts}")
+    if args.max_iter < 1:
+        raise InputError(f"max-iter: must be >= 1, got {args.max_iter}")
+    if not math.isfinite(args.s0) or args.s0 <= 0:
+        raise InputError(f"s0: must be a finite number > 0, got {args.s0}")
+    import design as ds
+
+    if not ds.dynamics_available():
+        raise InputError("target-speed: the snapping-speed design needs jaxrod.snap_speed, which is not available")
+    bounds = _bounds(args.bounds)
+    lo, hi = bounds.get("gap", (0.05, 0.95))
+    gaps = [0.5] if starts == 1 else [lo + (hi - lo) * (k + 1) / (starts + 1) for k in range(starts)]
+    gaps = [min(max(g, lo + 1e-3), hi - 1e-3) for g in gaps]
+    try:
+        res = ds.snap_speed_study(v, psi0, s0=args.s0, free_s0=args.free_s0, bounds=bounds, gaps=gaps, n=n,
+                                  n_check=n_check, tol=tol, max_iter=args.max_iter, progress=not args.json)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    b, chk = res.design, res.verification
+    rec = {"psi0_deg": b.psi0_deg, "gap": b.gap, "s0": b.s0, "snap_speed": _finite_or_none(res.v_s),
+           "target_snap_speed": v, "tol": tol, "reached": res.reached, "design_reached": bool(b.reached),
+           "status": b.status, "num_iterations": int(b.num_iterations), "n": n,
+           "check": chk.to_dict(), "message": res.message, "num_starts": len(res.runs),
+           "wall_time_s": res.wall_time}
+    if args.save:
+        try:
+            b.save(args.save)
+        except OSError as e:
+            raise InputError(f"save: cannot write {args.save!r}: {e.strerror or e}") from None
+        rec["saved"] = [args.save + ".eqx", args.save + ".json"]
+    if args.json:
+        print(json.dumps(rec))
+    else:
+        print(f"design: Psi0 = {b.psi0_deg:.4f} deg, G/L = {b.gap:.5f}, s0 = {b.s0:.5g}  (n = {n})")
+        print(f"  snap_speed  {res.v_s:.4f} v*  (target {v:g} +- {100 * tol:g} %)")
+        print(f"  check at N = {chk.n} ({chk.solver}, rtol {chk.rtol:g}): v_s = {chk.v_s:.4f} v*, "
+              f"error {100 * chk.error:.3f} %")
+        print(f"  {res.message}; {res.wall_time:.1f} s")
+    return EXIT_OK if res.reached else EXIT_NOT_CONVERGED
+
+
 def _cmd_design(args):
     if args.target_speed is not None:
-        import design as ds
-
-        if not ds.dynamics_available():
-            raise InputError("target-speed: the snapping-speed design needs jaxrod's dynamics API, "
-                             "which is not available yet")
+        return _cmd_design_speed(args)
+    if args.psi0 is not None:
+        raise InputError("psi0: only used with --target-speed (the angle design optimizes Psi0; "
+                         "fix it with --bounds psi0=LO:HI)")
+    if args.n is None:
+        args.n = 100
+    if args.starts is None:
+        args.starts = 4
     targets = [(args.target_alpha_up, "up"), (args.target_alpha_down, "down"), (args.target_hysteresis, "hyst")]
     if all(t is None for t, _ in targets):
         raise InputError("design: give at least one target (--target-alpha-up, --target-alpha-down, "
@@ -122,25 +190,38 @@ def register(sub):
 
     from ._cli import _EPILOG, _number
 
-    p = sub.add_parser("design", help="find (Psi0, G/L) with given snap angles",
+    p = sub.add_parser("design", help="find (Psi0, G/L) with given snap angles, or the gap with a snap speed",
                        description="Inverse design: multi-start Levenberg-Marquardt on (Psi0, G/L) [and s0]\n"
                                    "with implicit derivatives of the critical clamp angles; prints the design,\n"
                                    "the achieved values (on the design mesh --n) and whether the targets were\n"
-                                   "reached (exit 3 if not).",
+                                   "reached (exit 3 if not).\n\n"
+                                   "With --target-speed V: the gap G/L [and s0] at fold angle --psi0 whose\n"
+                                   "quasi-static snap up has v_s = V v* (jaxrod.snap_speed: fixed-step brink\n"
+                                   "dynamics, differentiable), within --speed-tol, then an independent check by\n"
+                                   "jaxrod.snap_dynamics (adaptive Dopri8, rtol 1e-9) on --check-n segments;\n"
+                                   "reached only if both agree.",
                        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--target-alpha-up", type=_number, default=None, metavar="DEG", help="alpha_c_up target")
     p.add_argument("--target-alpha-down", type=_number, default=None, metavar="DEG", help="alpha_c_down target")
     p.add_argument("--target-hysteresis", type=_number, default=None, metavar="DEG",
                    help="alpha_c_up - alpha_c_down target")
     p.add_argument("--target-speed", type=_number, default=None, metavar="V",
-                   help="snapping speed v_s / v* (needs the dynamics API)")
+                   help="snapping speed v_s / v* of the snap up (designs the gap at --psi0)")
+    p.add_argument("--psi0", type=_number, default=None, metavar="DEG",
+                   help="fold angle for --target-speed (default 90)")
+    p.add_argument("--speed-tol", type=_number, default=0.01, metavar="FRAC",
+                   help="relative tolerance of --target-speed (default %(default)g)")
+    p.add_argument("--check-n", type=int, default=None, metavar="N",
+                   help="mesh of the independent check of --target-speed (default 2 x --n)")
     p.add_argument("--tol", type=_number, default=0.1, metavar="DEG", help="tolerance (default %(default)g)")
     p.add_argument("--bounds", default="", metavar="SPEC",
                    help="e.g. psi0=30:120,gap=0.3:0.95 (defaults psi0 10:180, gap 0.05:0.95, s0 0.005:0.1)")
     p.add_argument("--s0", type=_number, default=0.02, help="fold width (fixed unless --free-s0)")
     p.add_argument("--free-s0", action="store_true", help="also optimize s0")
-    p.add_argument("--n", type=int, default=100, help="design mesh, segments (default %(default)d)")
-    p.add_argument("--starts", type=int, default=4, help="number of starts (default %(default)d)")
+    p.add_argument("--n", type=int, default=None,
+                   help="design mesh, segments (default 100; 48 with --target-speed)")
+    p.add_argument("--starts", type=int, default=None,
+                   help="number of starts (default 4; 1 with --target-speed, gap 0.5)")
     p.add_argument("--max-iter", type=int, default=30, help="iterations per start (default %(default)d)")
     p.add_argument("--seed", type=int, default=0, help="random starts seed")
     p.add_argument("--save", metavar="PATH", default=None, help="write PATH.eqx and PATH.json")

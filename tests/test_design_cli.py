@@ -17,7 +17,7 @@ from jaxrod._cli import main
     (["design", "--target-alpha-up", "60", "--n", "15"], "n"),
     (["design", "--target-alpha-up", "60", "--starts", "0"], "starts"),
     (["design", "--target-alpha-up", "60", "--s0", "-1"], "s0"),
-    (["design", "--target-speed", "20"], "target-speed"),
+    (["design", "--target-speed", "-5"], "target-speed"),
 ])
 def test_design_bad_input_is_one_line_exit_2(argv, word, capsys):
     assert main(argv) == 2

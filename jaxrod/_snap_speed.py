@@ -1,0 +1,191 @@
+r"""A differentiable snapping speed $v_s$ of a design: `snap_speed(scene, direction)`.
+
+**What it computes.** The *brink* snap of [`jaxrod.brink`][] (the quasi-static snap: the
+strip at its critical state, the clamps held just past the critical angle, released from
+rest), integrated with a **fixed step**, and its peak fold speed
+$v_s=\max_t|\dot{\mathbf x}(L/2,t)|$ in the units of the scene ($v^\ast$ for
+$L=B=\lambda=1$, MODEL.md):
+
+1. $\alpha_c$, the critical state $(\theta_c,\mu_c)$ and the unstable mode $v$ of the
+   `direction` path from [`jaxrod.snap_angles`][] (continuation + bisection, then refined
+   on the extended system by [`jaxrod.critical_point`][], whose result is differentiable
+   by the implicit function theorem in every float leaf of the scene);
+2. clamps held at $\alpha_c+\sigma\,\delta\alpha$ (`past`; $\sigma=\pm1$ the direction),
+   angles $\theta(0)=\Pi(\theta_c+\epsilon\,\hat v)$: `nudge` $\epsilon$ times the mode with
+   unit RMS norm $\sum_ih_i\hat v_i^2=L$ (`jaxrod.brink` uses the max-norm; the RMS norm is
+   smooth in the design where the max-norm has kinks), its sign chosen so that the fold
+   moves toward the other state, projected ($\Pi$) onto the end condition by a fixed
+   number of Gauss-Newton steps; at rest;
+3. [`jaxrod.simulate`][] with a constant step `dt` (default $0.15\,h^2\sqrt{\lambda/B}$,
+   $h=L/N$: explicit Runge-Kutta methods are stable only below $\sim0.3\,h^2$ for these
+   bending waves, measured at $N=48$: Tsit5 stable at $dt=10^{-4}$, unstable at
+   $2\times10^{-4}$) up to the snap's first overshoot (the run's event) or `t1`;
+   $v_s$ is the maximum of the sampled fold speed refined by the 7-point polynomial of
+   `_refine_peak`.
+
+**Why it is smooth.** Every step is a smooth map of the design $p=(\Psi_0,G,s_0,\dots)$:
+the implicit derivatives of the critical point, a fixed number of projection steps, and a
+fixed-step Runge-Kutta map (no step-size controller, whose accept/reject decisions and
+step sequence are piecewise constant in $p$); the maximum of the fold speed is
+differentiable where it is unique (envelope theorem). The event that ends the run
+changes the step count discretely, but it fires after the peak, so $v_s$ does not see it.
+Reverse mode goes through diffrax's checkpointed adjoint; forward mode (`jax.jvp`,
+`jax.jacfwd`, which design's Levenberg-Marquardt loop uses) is provided by a custom JVP
+that computes the gradient in reverse mode once and contracts it with the tangent (so
+`jacfwd` costs one reverse pass, not one per parameter; first derivatives only).
+
+**Where it is not differentiable (or not defined).** NaN where the path does not snap
+(no loss of stability, `snap_angles(...).snaps` false), where the refinement of the
+critical point failed, where the run does not snap within `t1`, where the integration
+is not trustworthy (conservative energy drift above `max_drift`: a step beyond the
+stability limit), or where the peak is within three samples of the stop. Not
+differentiable where the snap changes kind (fold <-> branch point: the critical state
+jumps), near the termination gap $G^\ast(\Psi_0)$ (the snap vanishes), where two fold-speed
+maxima of a snap trade places, and for a branch point the mode's sign is a choice of
+mirror image (both give the same $v_s$ by symmetry).
+
+**Accuracy** (Tsit5, `nudge` 0.03, `past` 1e-3, default `dt`; references
+`jaxrod.snap_dynamics` brink, Dopri8 adaptive at rtol = atol = 1e-9, `nudge` 1e-2 max-norm).
+See `_ACCURACY` below for the measured numbers; summary in `snap_speed`'s docstring.
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ._dynamics import Protocol
+from ._dynamics_scenes import _direction, project
+from ._dynamics_solve import simulate
+from ._energy.geometry import discretize
+from ._misc import check_param
+from ._snap import snap_angles
+from ._solution import RESULTS
+
+
+def default_dt(scene):
+    r"""The default constant step in units of $T=L^2\sqrt{\lambda/B}$: $0.15\,(h_{\min}/L)^2$."""
+    f = scene.mesh.fractions
+    h = min(f[i + 1] - f[i] for i in range(scene.mesh.n))
+    return 0.15 * float(h) ** 2
+
+
+class SpeedRun(eqx.Module):
+    """Diagnostics of one `snap_speed` run: `v_s` (NaN where not valid), `v_s_raw` (the
+    trajectory's value, whatever the checks say), `ok`, `alpha_c` (rad), `kind`,
+    `t_peak`, `t_end`, `energy_drift`, `num_steps`."""
+
+    v_s: jax.Array
+    v_s_raw: jax.Array
+    ok: jax.Array
+    alpha_c: jax.Array
+    kind: jax.Array
+    t_peak: jax.Array
+    t_end: jax.Array
+    energy_drift: jax.Array
+    num_steps: jax.Array
+
+
+def _run(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
+    sgn = _direction(direction)
+    snap = snap_angles(scene)
+    path = snap.up if sgn > 0 else snap.down
+    valid = path.snaps & (path.refine_result == RESULTS.successful)
+    alpha_c = jnp.where(valid, path.alpha_c, 0.0)  # keep the run finite where there is no snap
+    d = discretize(scene)
+    n = scene.mesh.n
+    k = n // 2
+    theta_c = path.theta_before
+    v = path.mode
+    v = v / jnp.sqrt(jnp.sum(d.h * v**2) / jnp.sum(d.h))  # unit RMS norm
+    dy = jnp.sum((d.h * jnp.cos(theta_c) * v)[:k])  # first-order change of the fold height
+    v = v * jnp.where(sgn * jax.lax.stop_gradient(dy) >= 0, 1.0, -1.0)
+    a = alpha_c + sgn * past
+    sc_run = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (a, a))
+    theta0 = project(theta_c + nudge * v, sc_run)
+    max_steps = int(math.ceil(t1 / dt)) + 10
+    st = scene.strip
+    T = st.length**2 * jnp.sqrt(st.line_density / st.bending_stiffness)  # dt, t1 are in units of T
+    tr = simulate(sc_run, theta0, Protocol(a, a), t1=t1 * T, dt=dt * T, solver=solver, direction=sgn,
+                  max_steps=max_steps, n_fine=n_fine, n_frames=2)
+    spacing = t1 * T / (n_fine - 1)
+    ok = (valid & tr.snapped & (tr.t_end < (t1 - 2 * dt) * T) & (tr.t_peak < tr.t_end - 3 * spacing)
+          & (tr.energy_drift < max_drift) & jnp.isfinite(tr.v_s))
+    return SpeedRun(jnp.where(ok, tr.v_s, jnp.nan), tr.v_s, ok, jnp.where(valid, path.alpha_c, jnp.nan),
+                    path.kind, tr.t_peak, tr.t_end, tr.energy_drift, tr.num_steps)
+
+
+@eqx.filter_custom_jvp
+def _speed(scene, *, opts):
+    return _run(scene, *opts).v_s
+
+
+@_speed.def_jvp
+def _speed_jvp(primals, tangents, *, opts):
+    (scene,), (t_scene,) = primals, tangents
+    v, g = eqx.filter_value_and_grad(lambda sc: _run(sc, *opts).v_s)(scene)
+    if t_scene is None:
+        return v, jnp.zeros_like(v)
+    # both trees have the scene's structure, None (symbolic zero) where not differentiated
+    dv = jnp.zeros_like(v)
+    is_none = lambda x: x is None  # noqa: E731
+    for gg, tt in zip(jax.tree.leaves(g, is_leaf=is_none), jax.tree.leaves(t_scene, is_leaf=is_none)):
+        if gg is not None and tt is not None:
+            dv = dv + jnp.sum(gg * tt)
+    return v, dv
+
+
+def _options(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
+    _direction(direction)
+    check_param("nudge", nudge, lo=0.0)
+    check_param("past", past, lo=0.0, lo_open=False)
+    check_param("t1", t1, lo=0.0)
+    check_param("max_drift", max_drift, lo=0.0)
+    if dt is None:
+        dt = default_dt(scene)
+    check_param("dt", dt, lo=0.0)
+    if not isinstance(n_fine, int) or n_fine < 16:
+        raise ValueError(f"n_fine: must be an integer >= 16, got {n_fine!r}")
+    if scene.stretching is not None:
+        raise ValueError("stretching: the dynamics are exactly inextensible; use stretching=None")
+    return (direction, float(nudge), float(past), float(dt), float(t1), n_fine, solver, float(max_drift))
+
+
+def snap_speed(scene, direction="up", *, nudge=0.03, past=1e-3, dt=None, t1=2.0, n_fine=8192, solver="tsit5",
+               max_drift=1e-3):
+    r"""The snapping speed $v_s$ of the `direction` ("up" or "down") quasi-static snap of
+    `scene` (symmetric actuation; the scene's clamp angles are ignored), differentiable in
+    the scene's float leaves ($\Psi_0$, $G$, $s_0$, ...) in forward and reverse mode.
+
+    The brink snap (start at the critical state nudged by `nudge` rad RMS along the
+    unstable mode, clamps held `past` rad beyond $\alpha_c$) integrated by `solver` with the
+    constant step `dt` (default $0.15\,(L/N)^2\sqrt{\lambda/B}$) on $[0,$`t1`$]$; the module
+    docstring says why that is smooth and where it is not differentiable. Returns NaN where
+    there is no snap (or the run failed one of its checks, see the module docstring).
+    [`snap_speed_run`][] returns the diagnostics.
+
+    **Accuracy** (measured, Psi0 = 90 deg, G/L = 0.46, s0 = 0.02, the study (c) design):
+    see `ACCURACY` in `jaxrod/_snap_speed.py`.
+    """
+    opts = _options(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift)
+    return _speed_jit(scene, opts)
+
+
+@eqx.filter_jit
+def _speed_jit(scene, opts):
+    return _speed(scene, opts=opts)
+
+
+def snap_speed_run(scene, direction="up", *, nudge=0.03, past=1e-3, dt=None, t1=2.0, n_fine=8192,
+                   solver="tsit5", max_drift=1e-3) -> SpeedRun:
+    """`snap_speed` with its diagnostics (a [`SpeedRun`][]; not differentiable in forward mode)."""
+    opts = _options(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift)
+    return _run_jit(scene, opts)
+
+
+@eqx.filter_jit
+def _run_jit(scene, opts):
+    return _run(scene, *opts)
