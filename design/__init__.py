@@ -7,6 +7,10 @@ Objectives (`AlphaUp`, `AlphaDown`, `Hysteresis`, `FoldHeight`, `BendingEnergy`,
 design studies (`snap_angle_study`, ...). float64 must be enabled by the caller.
 """
 
+from ._actuator import actuator_study as actuator_study
+from ._actuator import ActuatorResult as ActuatorResult
+from ._actuator import half_heights as half_heights
+from ._actuator import half_state as half_state
 from ._critical import Critical as Critical
 from ._critical import critical_angles as critical_angles
 from ._critical import design_scene as design_scene
@@ -26,7 +30,6 @@ from ._optimize import optimize as optimize
 from ._optimize import Problem as Problem
 from ._optimize import STATUS as STATUS
 from ._params import Parametrization as Parametrization
-from ._studies import actuator_study as actuator_study
 from ._studies import fastest_snap_study as fastest_snap_study
 from ._studies import snap_angle_study as snap_angle_study
 from ._studies import snap_speed_study as snap_speed_study

@@ -55,6 +55,7 @@ import dataclasses
 import math
 import time
 
+import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -331,35 +332,40 @@ def gradient_checks(psi0_deg, gap, beta_deg, *, s0=0.02, n=40, margin_deg=3.0, h
 
 
 def optimize_hold(psi0_deg, gap, beta0_deg, *, bounds_deg=(-150.0, -60.0), s0=0.02, n=40, margin_deg=3.0,
-                  max_iter=8, settings=Continuation()):
-    """Projected gradient ascent on m1(beta) with a backtracking line search (steps in
-    degrees). Returns (beta_deg, m1, history[(beta_deg, m1, dm1/dbeta per rad)])."""
+                  max_iter=8, tol_deg=1e-6, settings=Continuation()):
+    r"""Maximize $m_1(\beta)=\min(h_L,-h_R)$ (the landing margin of ``UD`` at $W_1$) over the
+    held angle $\beta$. Where both terms are smooth the maximum of the min is where they are
+    equal, $d(\beta)=h_L+h_R=0$ (in the explored designs $h_L$ falls and $-h_R$ rises as $\beta$
+    decreases): safeguarded Newton on $d$ with its implicit derivative (clipped to the bounds).
+    Returns (beta_deg, m1, history [(beta_deg, m1, d, dd/dbeta per rad)], local) with `local`
+    True if m1 at the result is at least m1 at beta +- 1 deg (checked by evaluation)."""
     f = _ud_margin_fn(psi0_deg, gap, s0, n, margin_deg, settings)
-    vg = jax.value_and_grad(lambda x: f(x)[0])
-    lo, hi = bounds_deg
-    beta = float(np.clip(beta0_deg, lo, hi))
-    val, g = (float(v) for v in vg(jnp.asarray(math.radians(beta))))
-    hist = [(beta, val, g)]
-    step = 10.0  # deg per unit of (normalized) gradient sign
+
+    def dfun(x):
+        m1, aux = f(x)
+        return aux["h"][0] + aux["h"][2], (m1, aux)
+
+    vg = eqx.filter_jit(jax.value_and_grad(dfun, has_aux=True))
+    lo, hi = (math.radians(v) for v in bounds_deg)
+    beta = float(np.clip(math.radians(beta0_deg), lo, hi))
+    hist = []
+    m1 = float("nan")
     for _ in range(max_iter):
-        if not (math.isfinite(val) and math.isfinite(g)) or step < 0.05:
+        (dv, (m1v, aux)), g = vg(jnp.asarray(beta))
+        dv, g, m1 = float(dv), float(g), float(m1v)
+        hist.append((math.degrees(beta), m1, dv, g))
+        if not (math.isfinite(dv) and math.isfinite(g) and bool(aux["snaps"])) or g == 0.0:
             break
-        improved = False
-        while step >= 0.05:
-            cand = float(np.clip(beta + step * np.sign(g), lo, hi))
-            if cand == beta:
-                break
-            cv, cg = (float(v) for v in vg(jnp.asarray(math.radians(cand))))
-            if math.isfinite(cv) and cv > val:
-                beta, val, g = cand, cv, cg
-                hist.append((beta, val, g))
-                improved = True
-                step *= 1.5
-                break
-            step *= 0.5
-        if not improved:
+        new = float(np.clip(beta - dv / g, lo, hi))
+        if abs(new - beta) < math.radians(tol_deg):
+            beta = new
             break
-    return beta, val, hist
+        beta = new
+    mfun = eqx.filter_jit(lambda x: f(x)[0])
+    m_best = float(mfun(jnp.asarray(beta)))
+    side = [float(mfun(jnp.asarray(beta + s * math.radians(1.0)))) for s in (-1.0, 1.0)]
+    local = bool(math.isfinite(m_best) and all(not math.isfinite(v) or m_best >= v for v in side))
+    return math.degrees(beta), m_best, hist, local
 
 
 def program_waypoints(psi0_deg, gap, beta_deg, *, s0=0.02, n=40, margin_deg=3.0, settings=Continuation()):
@@ -389,3 +395,199 @@ def program_waypoints(psi0_deg, gap, beta_deg, *, s0=0.02, n=40, margin_deg=3.0,
     wr = (beta_deg, crit["R"] + margin_deg)
     ws = (crit["S"] + margin_deg, crit["S"] + margin_deg)
     return [w0, wl, w0, wr, w0, ws, w0], info
+
+
+# ----- dynamic verification -------------------------------------------------------------
+
+@dataclasses.dataclass
+class DynamicMove:
+    """One move run with `jr.simulate`: clamps ramped at `rate` (rad/T) from waypoint to
+    waypoint, then held for `settle` T, with viscous damping. `t` frame times, `h` (frames, 3)
+    half heights; `start`/`final` letters; `flips` the halves whose letter changed at any
+    frame (a half that "stayed put" never changes letter); `kinetic_end` the kinetic energy
+    at the end (settled if small); `distance_to_static` the L2 distance of the final angle
+    field to the quasi-static end state of the move (rad)."""
+
+    a_from: tuple
+    a_to: tuple
+    t: np.ndarray
+    h: np.ndarray
+    start: str
+    final: str
+    flips: frozenset
+    kinetic_end: float
+    distance_to_static: float
+    v_peak: float
+    theta: np.ndarray
+    positions: np.ndarray
+    result: str
+
+
+def dynamic_ok(dm: DynamicMove, step: int, tol_distance=0.05, tol_kinetic=1e-4) -> bool:
+    """The dynamic move lands in the intended state, settled and on the quasi-static end state;
+    an actuation step flips exactly its halves (the other half keeps its letter at every frame)."""
+    s0, s1, halves = INTENDED[step]
+    ok = (dm.start == s0 and dm.final == s1 and dm.kinetic_end < tol_kinetic
+          and dm.distance_to_static < tol_distance and dm.result == "successful")
+    return ok and (halves is None or dm.flips == halves)
+
+
+def simulate_program(scene, waypoints_deg, *, rate=1.0, settle=6.0, damping=3.0, n_frames=96, tol=1e-7,
+                     static_moves=None):
+    """Run the program dynamically (`jr.simulate`, Tsit5 at rtol = atol = `tol`), each move
+    from rest in the state the previous one settled in. `static_moves`: the quasi-static
+    reports of the same program at the same mesh, for `distance_to_static`."""
+    _check_n(scene.mesh.n)
+    n = scene.mesh.n
+    sc = _at(scene, jnp.deg2rad(jnp.asarray(waypoints_deg[0], float)))
+    theta = jr.initial_state(sc, "down").theta
+    d = jr.discretize(scene)
+    w = np.asarray(d.h)
+    out = []
+    for k, (a, b) in enumerate(zip(waypoints_deg[:-1], waypoints_deg[1:])):
+        a0, a1 = np.radians(np.asarray(a, float)), np.radians(np.asarray(b, float))
+        T = float(np.max(np.abs(a1 - a0))) / rate
+        rl, rr = (a1 - a0) / T
+        proto = jr.Protocol(a0[0], a0[1], rl, rr, T)
+        t1 = T + settle
+        tr = jr.simulate(_at(scene, jnp.asarray(a0)), theta, proto, t1=jnp.asarray(t1), stop_at_snap=False,
+                         dissipation=jr.Dissipation(damping=damping), rtol=jnp.asarray(tol),
+                         atol=jnp.asarray(tol), n_frames=n_frames, n_fine=2048)
+        x = np.asarray(tr.positions)
+        h = x[:, [n // 4, n // 2, 3 * n // 4], 1]
+        letters = [half_state(hh) for hh in h]
+        flips = frozenset().union(*(flipped(letters[0], s) for s in letters))
+        theta = jnp.asarray(np.asarray(tr.theta)[-1])
+        kin = np.asarray(tr.kinetic)
+        kin_end = float(kin[np.isfinite(kin)][-1])
+        dist = float("nan")
+        if static_moves is not None:
+            dist = float(np.sqrt(np.sum(w * (np.asarray(theta) - static_moves[k].theta) ** 2)))
+        out.append(DynamicMove(tuple(a), tuple(b), np.asarray(tr.t_frames), h, letters[0], letters[-1], flips,
+                               kin_end, dist, float(tr.v_s), np.asarray(tr.theta), x,
+                               "successful" if bool(tr.result == dfx.RESULTS.successful) else str(tr.result)))
+    return out
+
+
+# ----- the study ------------------------------------------------------------------------
+
+@dataclasses.dataclass
+class ActuatorResult:
+    """Study (d). `waypoints` (deg; None where no program exists), `info` the critical angles,
+    `moves` the quasi-static program at `n`, `check` the same waypoints re-solved independently
+    at `n_check`, `dynamics` the dynamic run at `n_dyn` (or None), `gradients` the gradient
+    checks, `history` the optimization of the held angle, `timings` (s). `outcome`:
+    "reached" or "not reached: <first failing step and why>"."""
+
+    psi0_deg: float
+    gap: float
+    s0: float
+    beta_deg: float
+    margin_deg: float
+    n: int
+    n_check: int
+    waypoints: list | None
+    info: dict
+    moves: list
+    check: list
+    dynamics: list | None
+    gradients: list
+    history: list
+    timings: dict
+    outcome: str
+
+    @property
+    def reached(self) -> bool:
+        return self.outcome == "reached"
+
+    def summary(self) -> str:
+        lines = [f"design Psi0 = {self.psi0_deg:g} deg, G/L = {self.gap:g}, s0 = {self.s0:g}, "
+                 f"held angle beta = {self.beta_deg:.3f} deg, margin {self.margin_deg:g} deg",
+                 "critical angles: " + ", ".join(f"{k} = {v:.4f}" if isinstance(v, float) else f"{k} = {v}"
+                                                 for k, v in self.info.items())]
+        if self.waypoints is not None:
+            lines.append("waypoints (alpha_L, alpha_R) deg: " + " -> ".join(f"({a:.3f}, {b:.3f})"
+                                                                         for a, b in self.waypoints))
+        for tag, reps in (("N = %d" % self.n, self.moves), ("check N = %d" % self.n_check, self.check)):
+            for k, r in enumerate(reps):
+                ev = "; ".join(f"snap at ({e.alpha_deg[0]:.3f}, {e.alpha_deg[1]:.3f}) {e.before}->{e.after}"
+                               for e in r.events) or "no snap"
+                lines.append(f"[{tag}] step {k + 1} {STEP_NAMES[k]}: {r.start} -> {r.final} ({ev}); "
+                             f"h = ({r.h_final[0]:+.4f}, {r.h_final[1]:+.4f}, {r.h_final[2]:+.4f}); "
+                             f"{'ok' if move_ok(r, k) else 'FAILED'}")
+        for k, dmv in enumerate(self.dynamics or []):
+            lines.append(f"[dynamics] step {k + 1} {STEP_NAMES[k]}: {dmv.start} -> {dmv.final}, flipped "
+                         f"{''.join(sorted(dmv.flips)) or '-'}, v_peak = {dmv.v_peak:.2f}, E_k(end) = "
+                         f"{dmv.kinetic_end:.1e}, |theta - static| = {dmv.distance_to_static:.1e}; "
+                         f"{'ok' if dynamic_ok(dmv, k) else 'FAILED'}")
+        for g in self.gradients:
+            lines.append(f"gradient d{g.name}/dbeta at beta = {g.beta_deg:.3f}: implicit {g.grad:.6e}, "
+                         f"central difference {g.fd:.6e}, rel. error {g.rel_error:.1e}")
+        lines.append("outcome: " + self.outcome)
+        return "\n".join(lines)
+
+
+def _first_failure(reps, ok_fn, tag):
+    for k, r in enumerate(reps):
+        if not ok_fn(r, k):
+            s0, s1, _ = INTENDED[k]
+            got = f"{r.start} -> {r.final}"
+            return f"not reached: {tag} step {k + 1} ({STEP_NAMES[k]}, intended {s0} -> {s1}) gave {got}"
+    return None
+
+
+def actuator_study(psi0_deg=45.0, gap=0.5, beta_deg=-120.0, *, optimize=True, beta_bounds=(-150.0, -60.0),
+                   s0=0.02, n=40, n_check=80, n_dyn=32, margin_deg=3.0, max_iter=6, dynamics=True,
+                   check_gradients=True, progress=False) -> ActuatorResult:
+    """Study (d): a clamp-angle program that snaps the left half only, the right half only,
+    then both (module docstring for the definitions and the program).
+
+    With `optimize` the held angle beta (start `beta_deg`, within `beta_bounds`) maximizes
+    the landing margin m1 on `n` segments; the waypoints are the smallest moves past each
+    critical angle by `margin_deg`. The program is then run quasi-statically at `n`,
+    independently re-solved at `n_check`, and (with `dynamics`) integrated with
+    `jr.simulate` at `n_dyn`. `outcome` says "not reached: ..." with the first failing step
+    where any of them does not do what it says."""
+    for nm, v in (("n", n), ("n_check", n_check), ("n_dyn", n_dyn)):
+        _check_n(v)
+    timings, hist, grads, info_opt = {}, [], [], {}
+    say = print if progress else (lambda *a, **k: None)
+    t0 = time.perf_counter()
+    beta = float(beta_deg)
+    if optimize:
+        beta, m1, hist, local = optimize_hold(psi0_deg, gap, beta, bounds_deg=beta_bounds, s0=s0, n=n,
+                                              margin_deg=margin_deg, max_iter=max_iter)
+        info_opt = {"m1": m1, "local_max": local}
+        timings["optimize"] = time.perf_counter() - t0
+        say(f"held angle beta = {beta:.3f} deg, margin m1 = {m1:.4f} ({len(hist)} evaluations accepted)")
+    if check_gradients:
+        t1 = time.perf_counter()
+        grads = gradient_checks(psi0_deg, gap, beta, s0=s0, n=n, margin_deg=margin_deg)
+        timings["gradients"] = time.perf_counter() - t1
+    t1 = time.perf_counter()
+    wp, info = program_waypoints(psi0_deg, gap, beta, s0=s0, n=n, margin_deg=margin_deg)
+    timings["waypoints"] = time.perf_counter() - t1
+    info.update(info_opt)
+    res = ActuatorResult(psi0_deg, gap, s0, beta, margin_deg, n, n_check, wp, info, [], [], None, grads, hist,
+                         timings, "")
+    if wp is None:
+        res.outcome = ("not reached: no down state at (beta, beta)" if not info.get("down_state_found", True)
+                       else "not reached: a critical angle of the program does not exist (a path does not snap)")
+        return res
+    for tag, nn, attr in (("", n, "moves"), ("check", n_check, "check")):
+        t1 = time.perf_counter()
+        _, reps = run_program(jr.make_scene(psi0_deg, gap, 0.0, s0=s0, n=nn), wp)
+        setattr(res, attr, reps)
+        timings[attr] = time.perf_counter() - t1
+        say(f"quasi-static program at N = {nn}: " + ", ".join(f"{r.start}->{r.final}" for r in reps))
+    fail = _first_failure(res.moves, move_ok, f"N = {n}") or _first_failure(res.check, move_ok, f"N = {n_check}")
+    if dynamics and fail is None:
+        t1 = time.perf_counter()
+        scd = jr.make_scene(psi0_deg, gap, 0.0, s0=s0, n=n_dyn)
+        _, st = run_program(scd, wp)
+        res.dynamics = simulate_program(scd, wp, static_moves=st)
+        timings["dynamics"] = time.perf_counter() - t1
+        fail = _first_failure(res.dynamics, dynamic_ok, f"dynamics N = {n_dyn}")
+    res.outcome = fail or "reached"
+    timings["total"] = time.perf_counter() - t0
+    return res

@@ -286,10 +286,3 @@ def fastest_snap_study(min_gap=0.3, *, s0=0.02, psi0_bounds=(10.0, 180.0), max_g
     v0 = goal - math.sqrt(2.0 * float(best.best.history_loss[0]))
     chk = verify_snap_speed(d.psi0_deg, d.gap, d.s0, n_check, v, tol=0.01, rtol=check_rtol)
     return SpeedStudyResult("b", d, chk, runs, v, v0, time.perf_counter() - t0, float(min_gap))
-
-
-def actuator_study(**kwargs):
-    """Study (d): a clamp-move program snapping the left half only, the right half only,
-    then both (the paper's Fig. 4)."""
-    _needs_dynamics("actuator_study")
-    raise NotImplementedError("actuator_study: dynamics API present but not wired yet")  # pragma: no cover
