@@ -39,7 +39,7 @@ def test_design_cli_json_reaches_targets(capsys):
 def test_reproduce_quick_writes_report(tmp_path, capsys):
     assert main(["reproduce", "--out", str(tmp_path), "--quick"]) == 0
     text = (tmp_path / "report.md").read_text()
-    assert "73.6 deg" in text and "-80 deg" in text and "not available yet" in text
+    assert "73.6 deg" in text and "-80 deg" in text and "not available yet" not in text
     res = json.loads((tmp_path / "results.json").read_text())
     rows = res["sections"]["No snap at Psi0 = 30 deg, G/L = 0.8"]["rows"]
     assert rows[0][2] == "none"
@@ -48,3 +48,12 @@ def test_reproduce_quick_writes_report(tmp_path, capsys):
     assert abs(float(rows[0][2].split()[0]) - 77.41038) < 0.01, rows[0]
     assert abs(float(rows[1][2].split()[0]) + 82.94718) < 0.01, rows[1]
     assert (tmp_path / "master_curves.png").stat().st_size > 1000
+    # dynamics: the N = 60 brink snaps of benchmarks/results/reproduce-quick (Tsit5 1e-5)
+    plane = res["sections"]["Snap speed plane (Figs. 3d-e)"]["data"]
+    assert abs(plane["points"]["30/0.5"]["v_s"] - 26.42) < 0.05 and plane["fit"]["points"] >= 10
+    assert plane["fit"]["a"] > 0 and plane["fit"]["b"] > 0
+    ratio = res["sections"]["Folded vs unfolded snap speed (Fig. 1c)"]["data"]["ratio"]
+    assert 2.0 < ratio < 3.0, ratio
+    for name in ("speed_plane.png", "fig1c_fold_speed.png", "fig3_snap/chrono.png", "fig3_snap/speed_map.png",
+                 "fig3_snap/energies.png", "fig4_asymmetric/chrono.png"):
+        assert (tmp_path / name).stat().st_size > 1000, name

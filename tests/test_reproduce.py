@@ -1,0 +1,93 @@
+"""`jaxrod reproduce`'s dynamics sections on a small mesh (N = 24): numbers present and finite,
+the physics they must obey, and a resumed run that recomputes nothing. The whole quick report
+is checked end to end (slow) in test_design_cli.py."""
+
+import json
+import math
+
+import pytest
+
+import jaxrod as jr
+from design import _reproduce as rp
+
+CFG = dict(n=24, rtol=1e-5, psis=(30.0, 90.0, 180.0), gaps=(0.3, 0.5))
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("reproduce")
+    cache = rp._Cache(str(out / "cache.json"))
+    secs = {f.__name__: f(cache, str(out), False, CFG) for f in
+            (rp.section_snap_dynamics, rp.section_speed_plane, rp.section_folded_unfolded, rp.section_asymmetric)}
+    return out, secs
+
+
+def test_speed_plane_points_and_fit(report):
+    _, secs = report
+    _, _, rows, data = secs["section_speed_plane"]
+    pts = data["points"]
+    assert len(pts) == len(CFG["psis"]) * len(CFG["gaps"])
+    snapping = [r for r in pts.values() if r["snaps"]]
+    assert len(snapping) >= 4
+    for r in snapping:
+        assert math.isfinite(r["v_s"]) and r["v_s"] > 0 and r["energy_drift"] < 1e-4, r
+    # the fit: speed falls with the gap and with the fold angle (the paper's a, b > 0)
+    fit = data["fit"]
+    assert fit["a"] > 0 and fit["b"] > 0 and fit["v_m"] > 0, fit
+    assert [r[2].split()[0] for r in rows] == [f"{fit[k]:.2f}" for k in ("v_m", "a", "b")]
+    # at each fold angle v_s decreases with the gap
+    for p in CFG["psis"]:
+        v = [pts[f"{p:g}/{g:g}"]["v_s"] for g in CFG["gaps"] if pts[f"{p:g}/{g:g}"]["snaps"]]
+        assert all(a > b for a, b in zip(v, v[1:])), (p, v)
+
+
+def test_one_snap_energy_and_speed(report):
+    _, secs = report
+    _, _, rows, data = secs["section_snap_dynamics"]
+    rec = data["record"]
+    # clamps held, no dissipation: the kinetic energy cannot exceed the bending energy released
+    ratio = rec["kinetic_energy_peak"] / rec["bending_energy_before"]
+    assert 0.5 < ratio < 1.0, rec
+    assert float(rows[0][2]) == pytest.approx(ratio, abs=0.006)
+    fast = data["fastest"]
+    assert 0.0 <= fast["s_fastest_25"] <= 1.0 and abs(fast["s_fastest_peak"] - 0.5) < 0.1, fast
+
+
+def test_folded_faster_than_flat_and_units(report):
+    _, secs = report
+    _, _, rows, data = secs["section_folded_unfolded"]
+    assert data["ratio"] == pytest.approx(data["folded"]["v_s"] / data["flat"]["v_s"])
+    assert data["ratio"] > 1.5, data["ratio"]
+    # v* = (t / L) sqrt(E / (12 rho)), whatever the width
+    for t, v in rp.pet_speed_gauges().items():
+        e, rho, length = rp._PET["youngs_modulus"], rp._PET["density"], rp._PET["length"]
+        assert v == pytest.approx(t / length * math.sqrt(e / (12 * rho)), rel=1e-12)
+    lo, hi = (float(x) for x in rows[1][2].replace(" m/s", "").split(" - "))
+    vs = rp.pet_speed_gauges()
+    assert lo == pytest.approx(data["folded"]["v_s"] * vs[80e-6], abs=0.06)
+    assert hi == pytest.approx(data["folded"]["v_s"] * vs[250e-6], abs=0.06)
+
+
+def test_asymmetric_near_end_moves_first(report):
+    out, secs = report
+    _, _, rows, data = secs["section_asymmetric"]
+    turn, jump = data["turn"], data["snap"]
+    assert turn["disp_near"] > 3 * turn["disp_far"], turn  # the far end stays put while the clamp turns
+    assert 0 < data["alpha_snap_deg"] < 180 and math.isfinite(data["record"]["v_s"])
+    assert all(math.isfinite(jump[k]) for k in ("disp_near", "disp_far", "speed_near", "speed_far"))
+    assert (out / "fig4_asymmetric" / "chrono.png").stat().st_size > 1000
+
+
+def test_resume_recomputes_nothing(report, monkeypatch):
+    out, secs = report
+
+    def boom(*a, **k):
+        raise AssertionError("recomputed a cached point")
+
+    monkeypatch.setattr(jr, "snap_dynamics", boom)
+    monkeypatch.setattr(jr, "snap_angles", boom)
+    cache = rp._Cache(str(out / "cache.json"))
+    for f in (rp.section_snap_dynamics, rp.section_speed_plane, rp.section_folded_unfolded, rp.section_asymmetric):
+        again = f(cache, str(out), False, CFG)
+        assert again[2] == secs[f.__name__][2], f.__name__
+    assert json.loads((out / "cache.json").read_text()) == cache.data
