@@ -29,8 +29,10 @@ def _add_run_args(p):
     g.add_argument("--direction", choices=("up", "down"), default="up", help="snap up or down (default up)")
     g.add_argument("--nudge", type=float, default=0.05, help="brink: nudge along the unstable mode, rad (default 0.05)")
     g.add_argument("--rate", type=float, default=0.5, help="ramp/asymmetric: clamp rate, rad per T (default 0.5)")
-    g.add_argument("--solver", default="tsit5", help="tsit5 (default), dopri5, dopri8, kvaerno3, kvaerno5")
-    g.add_argument("--rtol", type=float, default=1e-6, help="relative = absolute tolerance (default 1e-6)")
+    g.add_argument("--solver", default="rattle",
+                   help="rattle (default: fixed step, symplectic), tsit5, dopri5, dopri8, kvaerno3, kvaerno5")
+    g.add_argument("--rtol", type=float, default=1e-6,
+                   help="adaptive solvers: relative = absolute tolerance (default 1e-6)")
     g.add_argument("--t1", type=float, default=4.0, help="time limit in T (default 4)")
 
 

@@ -150,15 +150,12 @@ def _bending_grads(theta, aL, aR, scene, d):
     return jax.grad(E, argnums=(0, 1, 2))(theta, aL, aR)
 
 
-def accelerations(t, y, scene, protocol, dissipation, baumgarte, d=None, with_work=False):
-    r"""$\ddot\theta(t,\theta,\dot\theta)$, see the module docstring. With `with_work`, also
-    the power of the clamps $\partial_{\alpha_L}V\,\dot\alpha_L+\partial_{\alpha_R}V\,\dot\alpha_R$.
-    `d`: `discretize(scene)`, reused across calls (only the clamp angles change with t)."""
-    theta, omega = y[0], y[1]
+def node_forces(t, theta, omega, scene, protocol, dissipation, d):
+    r"""The applied node forces $\mathbf f_k$ (N+1, 2) of the module docstring (bending pairs,
+    hinge viscosity, gravity, damping, drag; no tensions), with what the tension solve and
+    the clamp power need: `(f, x, v, d, (gL, gR, rL, rR))`, where `d` has the clamp angles
+    at time t, `x, v` the node positions and velocities, `gL = dE_b/dalpha_L` etc."""
     aL, aR, rL, rR = protocol.angles(t)
-    sc = scene
-    if d is None:
-        d = discretize(scene)
     d = d._replace(theta_left=jnp.asarray(aL, theta.dtype), theta_right=-jnp.asarray(aR, theta.dtype))
     gE, gL, gR = _bending_grads(theta, d.theta_left, -d.theta_right, scene, d)
     Q = -gE
@@ -169,18 +166,31 @@ def accelerations(t, y, scene, protocol, dissipation, baumgarte, d=None, with_wo
     tau = eta * phidot / d.ell  # (N+1,) hinge viscous moments
     Q = Q + (tau[1:] - tau[:-1])
     x, v = kinematics(theta, omega, d)
-    tt = jnp.stack([jnp.cos(theta), jnp.sin(theta)], -1)
     nn = jnp.stack([-jnp.sin(theta), jnp.cos(theta)], -1)
     m = d.node_mass
-    # node forces (N+1, 2)
     pair = (Q / d.h)[:, None] * nn
     f = jnp.zeros_like(x).at[1:].add(pair).at[:-1].add(-pair)
-    lam = sc.strip.line_density
-    if sc.gravity is not None:
-        f = f.at[:, 1].add(-m * sc.gravity.g)
+    lam = scene.strip.line_density
+    if scene.gravity is not None:
+        f = f.at[:, 1].add(-m * scene.gravity.g)
     f = f - dissipation.damping * m[:, None] * v
     speed = safe_norm(v)
     f = f - dissipation.drag * (m / lam)[:, None] * speed[:, None] * v
+    return f, x, v, d, (gL, gR, rL, rR)
+
+
+def accelerations(t, y, scene, protocol, dissipation, baumgarte, d=None, with_work=False):
+    r"""$\ddot\theta(t,\theta,\dot\theta)$, see the module docstring. With `with_work`, also
+    the power of the clamps $\partial_{\alpha_L}V\,\dot\alpha_L+\partial_{\alpha_R}V\,\dot\alpha_R$.
+    `d`: `discretize(scene)`, reused across calls (only the clamp angles change with t)."""
+    theta, omega = y[0], y[1]
+    sc = scene
+    if d is None:
+        d = discretize(scene)
+    f, x, v, d, (gL, gR, rL, rR) = node_forces(t, theta, omega, scene, protocol, dissipation, d)
+    tt = jnp.stack([jnp.cos(theta), jnp.sin(theta)], -1)
+    nn = jnp.stack([-jnp.sin(theta), jnp.cos(theta)], -1)
+    m = d.node_mass
     invm = jnp.concatenate([jnp.zeros(1, m.dtype), 1.0 / m[1:-1], jnp.zeros(1, m.dtype)])
     # prescribed accelerations of the end nodes (node N: Baumgarte-stabilized end condition)
     target = jnp.stack([sc.clamps.gap, jnp.zeros((), x.dtype)])

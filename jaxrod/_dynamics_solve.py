@@ -3,11 +3,18 @@ r"""Time integration of the snap with diffrax: solvers, events, the sampled traj
 `simulate` integrates $y=((\theta,\dot\theta), W)$ where $W(t)=\int_0^t \partial_tV\,dt$ is the
 work done by the rotating clamps (so $E_k+V-W$ is conserved when undamped), with
 
-* an explicit adaptive Runge-Kutta scheme (`"tsit5"` default, `"dopri5"`, `"dopri8"`), or
+* `"rattle"` (default): RATTLE in the Cartesian node coordinates of the link chain
+  (`jaxrod._rattle`): symplectic, second order, link lengths and both ends exact, one
+  bending gradient per fixed step just below its stability limit $\omega_{\max}\Delta t<2$;
+* an explicit adaptive Runge-Kutta scheme (`"tsit5"`, `"dopri5"`, `"dopri8"`), or
 * an implicit (L-stable ESDIRK) scheme, `"kvaerno5"` / `"kvaerno3"` (Newton with the dense
   Jacobian of the vector field, which damps the highest bending modes),
 
-and a PID step-size controller (`rtol`, `atol`). A boolean diffrax `Event` stops the run
+the adaptive ones with a PID step-size controller (`rtol`, `atol`). Measured on the brink
+snap (benchmarks/results/dynamics.md): the undamped strip rings in its highest bending
+modes, so even the implicit schemes take about as many steps as the explicit ones at
+useful tolerances, and the adaptive explicit schemes sit at their stability limit; RATTLE
+takes fewer, cheaper steps for the same $v_s$ accuracy. A boolean diffrax `Event` stops the run
 once the snap is over: the fold node has crossed $y=0$ in the snapping direction and then
 reversed its vertical velocity (its first overshoot), or at `t1`.
 
@@ -25,6 +32,8 @@ envelope theorem), so it is differentiated as it is, through diffrax's
 
 from __future__ import annotations
 
+import math
+
 import diffrax as dfx
 import equinox as eqx
 import jax
@@ -33,6 +42,7 @@ import numpy as np
 
 from ._dynamics import Dissipation, Protocol, accelerations, check_scene, observables
 from ._energy.geometry import discretize
+from ._rattle import Rattle
 
 
 SOLVERS = {
@@ -41,8 +51,10 @@ SOLVERS = {
     "dopri8": dfx.Dopri8,
     "kvaerno3": dfx.Kvaerno3,
     "kvaerno5": dfx.Kvaerno5,
+    "rattle": Rattle,
 }
-EXPLICIT = ("tsit5", "dopri5", "dopri8")
+EXPLICIT = ("tsit5", "dopri5", "dopri8", "rattle")
+FIXED_STEP = ("rattle",)
 
 
 class Trajectory(eqx.Module):
@@ -135,17 +147,25 @@ def _refine_peak(t, f):
 
 @eqx.filter_jit
 def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, direction=1.0,
-             stop_at_snap: bool = True, solver: str = "tsit5", rtol=1e-8, atol=1e-8, dt=None,
+             stop_at_snap: bool = True, solver: str = "rattle", rtol=1e-8, atol=1e-8, dt=None,
              dissipation: Dissipation = Dissipation(), baumgarte=20.0, n_fine: int = 16384,
-             n_frames: int = 64, frame_window=None, max_steps: int = 200_000) -> Trajectory:
+             n_frames: int = 64, frame_window=None, max_steps: int | None = None,
+             courant: float = 0.45) -> Trajectory:
     r"""Integrate the strip from angles `theta0` (and rates `omega0`, default 0) under the
     clamp `protocol` for $t\in[0,t_1]$ (see the module docstring).
 
     **Arguments:** `direction` +1 for a snap up (fold height rising through 0), -1 down;
     `stop_at_snap` stop at the first overshoot after the crossing; `solver` a key of
-    `SOLVERS`; `rtol`, `atol` the PID controller's tolerances, or `dt` a constant step
-    (then no error control); `baumgarte` $\Omega$ of the end-condition stabilization;
-    `frame_window` (t_a, t_b) the span of the `n_frames` frames (default (0, t1)).
+    `SOLVERS` (default `"rattle"`, fixed steps); `rtol`, `atol` the PID controller's
+    tolerances of the adaptive solvers, or `dt` a constant step (then no error control); `baumgarte` $\Omega$ of the end-condition stabilization;
+    `frame_window` (t_a, t_b) the span of the `n_frames` frames (default (0, t1));
+    `courant` (`"rattle"` only, when `dt` is None): the step is the largest
+    $\Delta t\le$ `courant`$\,h_{\min}^2\sqrt{\lambda/B}$ that divides the fine-grid spacing
+    $t_1/(n_{fine}-1)$, so every fine-grid sample is a step point (no interpolation error in
+    $v_s$ or the energies); RATTLE is stable below 0.5 (the highest bending mode
+    $4\sqrt{B/\lambda}/h^2$). `max_steps`: default 200 000, or for `"rattle"` enough fixed
+    steps for $t_1$ when $L=B=\lambda=1$; a run that hits it ends with
+    `result == RESULTS.max_steps_reached`.
 
     **Returns:** a [`jaxrod.Trajectory`][].
     """
@@ -187,6 +207,23 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
         return (direction * fh > 0.0) & (direction * vy < 0.0)
 
     event = dfx.Event(done) if stop_at_snap else None
+    if solver in FIXED_STEP and dt is None:
+        if not 0.0 < courant < 0.5:
+            raise ValueError(f"courant must lie in (0, 0.5) (RATTLE's stability limit), got {courant!r}")
+        st = scene.strip
+        frac_min = float(np.min(np.diff(np.asarray(scene.mesh.fractions))))  # static
+        h_min = st.length * frac_min
+        dt_max = courant * h_min**2 * jnp.sqrt(st.line_density / st.bending_stiffness)
+        grid = t1 / (n_fine - 1)
+        dt = grid / jnp.ceil(grid / dt_max)
+        if max_steps is None:
+            steps = 0
+            if isinstance(t1, (int, float)):  # natural units L = B = lambda = 1
+                g = t1 / (n_fine - 1)
+                steps = (n_fine - 1) * math.ceil(g / (courant * frac_min**2))
+            max_steps = max(200_000, steps + 64)
+    if max_steps is None:
+        max_steps = 200_000
     if dt is None:
         controller = dfx.PIDController(rtol=rtol, atol=atol, pcoeff=0.0, icoeff=1.0)
         dt0 = None

@@ -27,8 +27,9 @@ def snap30():
 def brink_run(snap30):
     sc, snap = snap30
     start = jr.brink(sc, "up", snap=snap, nudge=0.05)
-    # tolerances as arrays: one compilation for all three (Python floats would be static)
-    runs = {tol: jr.simulate(start.scene, start.theta0, start.protocol, direction=1.0, t1=3.0,
+    # the adaptive explicit path (the default, RATTLE, is in test_rattle.py); tolerances as
+    # arrays: one compilation for all three (Python floats would be static)
+    runs = {tol: jr.simulate(start.scene, start.theta0, start.protocol, direction=1.0, t1=3.0, solver="tsit5",
                              rtol=jnp.asarray(tol), atol=jnp.asarray(tol))
             for tol in (1e-4, 1e-6, 1e-8)}
     return start, runs
@@ -91,9 +92,8 @@ def test_energy_trade_at_snap(brink_run):
 def test_damping_dissipates(snap30):
     sc, snap = snap30
     start = jr.brink(sc, "up", snap=snap, nudge=0.05)
-    tol = jnp.asarray(1e-6)
-    free = jr.simulate(start.scene, start.theta0, start.protocol, direction=1.0, t1=3.0, rtol=tol, atol=tol)
-    damped = jr.simulate(start.scene, start.theta0, start.protocol, direction=1.0, t1=3.0, rtol=tol, atol=tol,
+    free = jr.simulate(start.scene, start.theta0, start.protocol, direction=1.0, t1=3.0)
+    damped = jr.simulate(start.scene, start.theta0, start.protocol, direction=1.0, t1=3.0,
                          dissipation=jr.Dissipation(damping=2.0))
     assert float(damped.v_s) < float(free.v_s)
     assert math.isnan(float(damped.energy_drift))
@@ -137,9 +137,7 @@ def test_brink_and_slow_ramp_agree_small_n(snap30, brink_run):
     alpha_c is a branch point) snaps at the brink's v_s within 3 %."""
     sc, snap = snap30
     _, runs = brink_run
-    tol = jnp.asarray(1e-6)
-    start, r = jr.snap_dynamics(sc, "up", kind="ramp", rate=0.2, seed=1e-3, snap=snap, rtol=tol, atol=tol,
-                                t1=jnp.asarray(3.0))
+    start, r = jr.snap_dynamics(sc, "up", kind="ramp", rate=0.2, seed=1e-3, snap=snap, t1=3.0)
     b = runs[1e-6]
     assert bool(r.snapped) and bool(b.snapped)
     assert abs(float(r.v_s) / float(b.v_s) - 1) < 0.03, (float(r.v_s), float(b.v_s))
@@ -154,9 +152,7 @@ def test_flat_strip_snaps_at_statics_alpha_c_small_n():
     sc = jr.make_scene(180, 0.5, 0, n=N)
     snap = jr.snap_angles(sc)
     rate = 0.05
-    tol = jnp.asarray(1e-6)
-    start, tr = jr.snap_dynamics(sc, "up", kind="ramp", rate=rate, seed=1e-2, snap=snap, rtol=tol, atol=tol,
-                                 t1=jnp.asarray(3.0))
+    start, tr = jr.snap_dynamics(sc, "up", kind="ramp", rate=rate, seed=1e-2, snap=snap, t1=3.0)
     assert bool(tr.snapped)
     t, fs = np.asarray(tr.t), np.asarray(tr.fold_speed)
     i = int(np.argmax(np.where(np.isfinite(fs), fs, 0) > 1.0))
@@ -165,15 +161,14 @@ def test_flat_strip_snaps_at_statics_alpha_c_small_n():
     assert 0.0 <= alpha_dep - ac < math.radians(2.0), (math.degrees(alpha_dep), math.degrees(ac))
 
 
-def asymmetric_quarters(n, t1=4.0, tol=1e-6):
+def asymmetric_quarters(n, t1=4.0):
     """Right clamp turned at 0.5 rad/T from 0 (left clamp held at 0), Psi0 = 60 deg, G/L = 0.5:
     the largest node displacement (from the start) in the left and right quarters while the
     clamp turns, up to 0.1 T before the fold crosses 0, and the largest node speeds in the
     quarters over the snap (to the first overshoot)."""
     sc = jr.make_scene(60, 0.5, 0, n=n)
-    tol = jnp.asarray(tol)
-    start, tr = jr.snap_dynamics(sc, "up", kind="asymmetric", rate=0.5, alpha_start=0.0, rtol=tol, atol=tol,
-                                 t1=jnp.asarray(t1), stop_at_snap=True, n_frames=128)
+    start, tr = jr.snap_dynamics(sc, "up", kind="asymmetric", rate=0.5, alpha_start=0.0, t1=t1,
+                                 stop_at_snap=True, n_frames=128)
     assert bool(tr.snapped)
     x, sp, tf = np.asarray(tr.positions), np.asarray(tr.speed), np.asarray(tr.t_frames)
     ok = np.isfinite(sp).all(1)

@@ -19,17 +19,17 @@ def _scene(p, n, alpha):
     return jr.Scene(jr.Strip(psi0=p[0], s0=p[2]), jr.Clamps(p[1], alpha, alpha), jr.Mesh(n))
 
 
-def seeded_ramp_vs(p, n, a0, base, *, seed=0.02, dt=5e-4, t1=1.2, n_fine=2048):
+def seeded_ramp_vs(p, n, a0, base, *, seed=0.02, dt=5e-4, t1=1.2, n_fine=2048, solver="tsit5"):
     """v_s of a snap up that is smooth in p = (Psi0, G, s0): the down state at clamp angle a0
     (Newton from `base`, implicit derivative), seeded along the mirror-breaking shape (a
     symmetric ramp from a symmetric state never leaves it at a branch point), the clamps then
     turned by 1 deg at 1 rad/T and held; a fixed step (no step-size control, so the discrete
-    map is smooth); the run stops at the snap's first overshoot. Returns (v_s, t_peak, t_end)."""
+    map is smooth; Tsit5 by default, RATTLE in test_rattle.py); the run stops at the snap's first overshoot. Returns (v_s, t_peak, t_end)."""
     sc = _scene(p, n, a0)
     eq = jr.solve_equilibrium(sc, base.theta, base.force)
     theta = mirror_seed(eq.theta, sc, seed)
     prot = jr.Protocol(a0, a0, 1.0, 1.0, t_stop=math.radians(1.0))
-    tr = jr.simulate(sc, theta, prot, t1=t1, dt=dt, direction=1.0, max_steps=int(round(t1 / dt)) + 10,
+    tr = jr.simulate(sc, theta, prot, t1=t1, dt=dt, solver=solver, direction=1.0, max_steps=int(round(t1 / dt)) + 10,
                      n_fine=n_fine)
     return jnp.stack([tr.v_s, tr.t_peak, tr.t_end])
 

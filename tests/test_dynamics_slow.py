@@ -97,6 +97,6 @@ def test_asymmetric_far_half_stays_put():
     """Only the right clamp rotates (paper Fig. 4): while it turns, the quarter next to the fixed
     left clamp stays put (< 1/3 of the displacement next to the moving clamp); in the snap
     the far half is the one that jumps."""
-    d_left, d_right, s_left, s_right = asymmetric_quarters(32, tol=1e-7)
+    d_left, d_right, s_left, s_right = asymmetric_quarters(32)
     assert d_right > 3 * d_left, (d_left, d_right)
     assert s_left > s_right, (s_left, s_right)
