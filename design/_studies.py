@@ -230,7 +230,7 @@ def _speed_of(run):
 
 
 def snap_speed_study(target_speed=20.0, psi0_deg=90.0, *, s0=0.02, free_s0=False, bounds=None, gaps=(0.5,),
-                     n=64, n_check=128, tol=0.01, max_iter=20, check_rtol=1e-9, progress=True,
+                     n=48, n_check=96, tol=0.01, max_iter=20, check_rtol=1e-9, progress=True,
                      **speed_options) -> SpeedStudyResult:
     """Study (c): the gap G/L (and s0 with `free_s0`) at which the snap up of a strip with
     fold angle `psi0_deg` has v_s = `target_speed` v* (relative tolerance `tol`, 1 %).
@@ -258,7 +258,7 @@ def snap_speed_study(target_speed=20.0, psi0_deg=90.0, *, s0=0.02, free_s0=False
 
 
 def fastest_snap_study(min_gap=0.3, *, s0=0.02, psi0_bounds=(10.0, 180.0), max_gap=0.95,
-                       starts=((90.0, 0.5),), goal=100.0, n=64, n_check=128, max_iter=20, check_rtol=1e-9,
+                       starts=((90.0, 0.5),), goal=100.0, n=48, n_check=96, max_iter=20, check_rtol=1e-9,
                        progress=True, **speed_options) -> SpeedStudyResult:
     """Study (b): maximize v_s / v* of the snap up over (Psi0, G/L), G/L in (`min_gap`,
     `max_gap`), Psi0 in `psi0_bounds` (degrees), s0 fixed.

@@ -213,7 +213,7 @@ def register(sub):
                    help="relative tolerance of --target-speed (default %(default)g)")
     p.add_argument("--check-n", type=int, default=None, metavar="N",
                    help="mesh of the independent check of --target-speed (default 2 x --n)")
-    p.add_argument("--tol", type=_number, default=0.1, metavar="DEG", help="tolerance (default %(default)g)")
+    p.add_argument("--tol", type=_number, default=0.1, metavar="DEG", help="angle tolerance, deg (default %(default)g)")
     p.add_argument("--bounds", default="", metavar="SPEC",
                    help="e.g. psi0=30:120,gap=0.3:0.95 (defaults psi0 10:180, gap 0.05:0.95, s0 0.005:0.1)")
     p.add_argument("--s0", type=_number, default=0.02, help="fold width (fixed unless --free-s0)")

@@ -1,8 +1,9 @@
 """The notebooks run top to bottom in quick mode (JAXROD_QUICK=1) with nbclient.
 
 01 (equilibria, stability, hysteresis) runs by default; 02 (snap-angle design: compiles the
-critical-angle sensitivity and the design loop) is marked slow. Notebooks are committed
-without outputs (checked here too)."""
+critical-angle sensitivity and the design loop) and 03 (snap-speed design: compiles the
+differentiable dynamics for each study, minutes even in quick mode) are marked slow.
+Notebooks are committed without outputs (checked here too)."""
 
 import os
 from pathlib import Path
@@ -44,6 +45,13 @@ def test_notebook_01_getting_started():
 def test_notebook_02_snap_angle_design():
     out = _text(_run("02_snap_angle_design.ipynb"))
     assert "'reached': True" in out and "target not reached" in out
+
+
+@pytest.mark.slow
+def test_notebook_03_snap_speed_design():
+    out = _text(_run("03_snap_speed_design.ipynb"))
+    assert "quick mode" in out and "target reached" in out and "target not reached" in out
+    assert "fastest snap found" in out
 
 
 def test_notebooks_committed_without_outputs():
