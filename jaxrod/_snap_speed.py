@@ -16,12 +16,14 @@ $L=B=\lambda=1$, MODEL.md):
    smooth in the design where the max-norm has kinks), its sign chosen so that the fold
    moves toward the other state, projected ($\Pi$) onto the end condition by a fixed
    number of Gauss-Newton steps; at rest;
-3. [`jaxrod.simulate`][] with a constant step `dt` (default $0.15\,h^2\sqrt{\lambda/B}$,
-   $h=L/N$: explicit Runge-Kutta methods are stable only below $\sim0.3\,h^2$ for these
-   bending waves, measured at $N=48$: Tsit5 stable at $dt=10^{-4}$, unstable at
-   $2\times10^{-4}$) up to the snap's first overshoot (the run's event) or `t1`;
-   $v_s$ is the maximum of the sampled fold speed refined by the 7-point polynomial of
-   `_refine_peak`.
+3. [`jaxrod.simulate`][] with the explicit `solver` (Tsit5) at a constant step `dt`
+   (default $0.15\,(h/L)^2\,T$, $h=L/N$, $T=L^2\sqrt{\lambda/B}$: explicit Runge-Kutta
+   methods are stable only below $\sim0.3\,(h/L)^2T$ for these bending waves, measured at
+   $N=48$: Tsit5 stable at $dt=10^{-4}=0.23\,h^2$, unstable at $2\times10^{-4}$) up to the
+   snap's first overshoot (the run's event) or `t1`; $v_s$ is the maximum of the fold
+   speed sampled on `n_fine` times, refined by the 7-point polynomial of `_refine_peak`.
+   (`simulate` now also has a fixed-step RATTLE solver; `snap_speed` was measured with
+   Tsit5 and keeps it until RATTLE is measured here too.)
 
 **Why it is smooth.** Every step is a smooth map of the design $p=(\Psi_0,G,s_0,\dots)$:
 the implicit derivatives of the critical point, a fixed number of projection steps, and a
@@ -38,7 +40,8 @@ that computes the gradient in reverse mode once and contracts it with the tangen
 (no loss of stability, `snap_angles(...).snaps` false), where the refinement of the
 critical point failed, where the run does not snap within `t1`, where the integration
 is not trustworthy (conservative energy drift above `max_drift`: a step beyond the
-stability limit), or where the peak is within three samples of the stop. Not
+stability limit), or where the peak is within three samples of the stop (the fold speed
+still rising at the first overshoot, e.g. Psi0 <= 10 deg at G/L = 0.3, N = 24). Not
 differentiable where the snap changes kind (fold <-> branch point: the critical state
 jumps), near the termination gap $G^\ast(\Psi_0)$ (the snap vanishes), where two fold-speed
 maxima of a snap trade places, and for a branch point the mode's sign is a choice of
