@@ -19,7 +19,7 @@ once the snap is over: the fold node has crossed $y=0$ in the snapping direction
 reversed its vertical velocity (its first overshoot), or at `t1`.
 
 Observables (fold height, fold velocity, energies) are saved on a fine uniform grid of
-`n_fine` times on $[0,t_1]$ (scalars only, cheap); angles and node speeds on `n_frames`
+`n_fine` times on $[0,t_1]$ (scalars only, cheap; default 16384, for RATTLE one per step); angles and node speeds on `n_frames`
 times (the chronophotography and the speed map $v(s,t)$). The snapping speed
 $v_s=\max_t|\dot{\mathbf x}(L/2,t)|$ is the grid maximum refined by the parabola through the
 seven samples around it, maximized (`_refine_peak`; the three-point parabola used before
@@ -145,10 +145,31 @@ def _refine_peak(t, f):
     return jnp.where(use7, v7, v3), t[i] + u * dt
 
 
+# RATTLE's step is also capped at DT_CAP T (T = L^2 sqrt(lambda/B)): on coarse meshes
+# (N < ~48) the stability bound courant h^2 exceeds it, and there the fast rotation of the
+# crease during the snap (rate ~ v_s / s0), not stability, sets the error: measured at N = 24,
+# energy error 1.1e-3 at dt = 1.8e-4 T but 1.3e-2 at 7.3e-4 T (v_s error 7e-4).
+DT_CAP = 2e-4
+
+
+def _rattle_dt_natural(scene, courant):
+    """RATTLE's largest step in units of T (static: from the mesh fractions)."""
+    frac_min = float(np.min(np.diff(np.asarray(scene.mesh.fractions))))
+    return min(courant * frac_min**2, DT_CAP)
+
+
+def _default_n_fine(scene, solver, dt, t1, courant):
+    """16384 samples; for RATTLE without `dt`, one per step (natural units, at most 2^19,
+    at least 2048), so its step is its largest one rather than a divisor of the grid."""
+    if solver not in FIXED_STEP or dt is not None or not isinstance(t1, (int, float)) or not 0 < courant < 0.5:
+        return 16384
+    return int(min(max(math.ceil(t1 / _rattle_dt_natural(scene, courant)) + 1, 2048), 2**19))
+
+
 @eqx.filter_jit
 def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, direction=1.0,
              stop_at_snap: bool = True, solver: str = "rattle", rtol=1e-8, atol=1e-8, dt=None,
-             dissipation: Dissipation = Dissipation(), baumgarte=20.0, n_fine: int = 16384,
+             dissipation: Dissipation = Dissipation(), baumgarte=20.0, n_fine: int | None = None,
              n_frames: int = 64, frame_window=None, max_steps: int | None = None,
              courant: float = 0.45) -> Trajectory:
     r"""Integrate the strip from angles `theta0` (and rates `omega0`, default 0) under the
@@ -160,10 +181,11 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     tolerances of the adaptive solvers, or `dt` a constant step (then no error control); `baumgarte` $\Omega$ of the end-condition stabilization;
     `frame_window` (t_a, t_b) the span of the `n_frames` frames (default (0, t1));
     `courant` (`"rattle"` only, when `dt` is None): the step is the largest
-    $\Delta t\le$ `courant`$\,h_{\min}^2\sqrt{\lambda/B}$ that divides the fine-grid spacing
+    $\Delta t\le\min($`courant`$\,(h_{\min}/L)^2,\ 2\cdot10^{-4})\,T$, $T=L^2\sqrt{\lambda/B}$
+    (the cap `DT_CAP` matters below N ~ 48) that divides the fine-grid spacing
     $t_1/(n_{fine}-1)$, so every fine-grid sample is a step point (no interpolation error in
-    $v_s$ or the energies); RATTLE is stable below 0.5 (the highest bending mode
-    $4\sqrt{B/\lambda}/h^2$). `max_steps`: default 200 000, or for `"rattle"` enough fixed
+    $v_s$ or the energies; by default `n_fine` is one sample per step); RATTLE is stable
+    below 0.5 (the highest bending mode $4\sqrt{B/\lambda}/h^2$). `max_steps`: default 200 000, or for `"rattle"` enough fixed
     steps for $t_1$ when $L=B=\lambda=1$; a run that hits it ends with
     `result == RESULTS.max_steps_reached`.
 
@@ -181,6 +203,8 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     y0 = (jnp.stack([theta0, omega0]), jnp.zeros((), dtype))
     d = discretize(scene)
     args = (scene, protocol, dissipation, jnp.asarray(baumgarte, dtype), d)
+    if n_fine is None:
+        n_fine = _default_n_fine(scene, solver, dt, t1, courant)
     ts = jnp.linspace(0.0, t1, n_fine)
     if frame_window is None:
         frame_window = (0.0, t1)
@@ -211,16 +235,15 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
         if not 0.0 < courant < 0.5:
             raise ValueError(f"courant must lie in (0, 0.5) (RATTLE's stability limit), got {courant!r}")
         st = scene.strip
-        frac_min = float(np.min(np.diff(np.asarray(scene.mesh.fractions))))  # static
-        h_min = st.length * frac_min
-        dt_max = courant * h_min**2 * jnp.sqrt(st.line_density / st.bending_stiffness)
+        T = st.length**2 * jnp.sqrt(st.line_density / st.bending_stiffness)
+        dt_max = _rattle_dt_natural(scene, courant) * T
         grid = t1 / (n_fine - 1)
         dt = grid / jnp.ceil(grid / dt_max)
         if max_steps is None:
             steps = 0
             if isinstance(t1, (int, float)):  # natural units L = B = lambda = 1
                 g = t1 / (n_fine - 1)
-                steps = (n_fine - 1) * math.ceil(g / (courant * frac_min**2))
+                steps = (n_fine - 1) * math.ceil(g / _rattle_dt_natural(scene, courant))
             max_steps = max(200_000, steps + 64)
     if max_steps is None:
         max_steps = 200_000
