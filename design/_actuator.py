@@ -63,12 +63,12 @@ import numpy as np
 from jax import lax
 
 import jaxrod as jr
-from jaxrod._continuation import AbstractParameter, Continuation, LeftAlpha, RightAlpha
+from jaxrod._continuation import AbstractParameter, Continuation, LeftAlpha
 from jaxrod._critical import critical_point
 from jaxrod._energy.lagrangian import positions
 from jaxrod._initial import _initial_state
 from jaxrod._kkt import modes, smallest_eigenvalues, structured
-from jaxrod._snap import KIND_NAMES, _path
+from jaxrod._snap import _path
 from jaxrod._solution import RESULTS, Equilibrium
 
 
@@ -284,8 +284,9 @@ def _one_sided(scene, theta, force, direction, parameter, settings):
 
 def _ud_margin_fn(psi0_deg, gap, s0, n, margin_deg, settings):
     """beta (rad) -> (m1, details): the landing margin min(h_L, -h_R) of the state at W1 of
-    the program held at beta; differentiable (implicit gradients of alpha_c and of the
-    equilibrium at W1) where the one-sided path snaps."""
+    the program held at beta, W1 placed `margin_deg` past the refined one-sided critical
+    angle; differentiable (implicit gradients of alpha_c and of the equilibrium at W1) where
+    the one-sided path snaps."""
     base = jr.make_scene(psi0_deg, gap, 0.0, s0=s0, n=n)
     dm = math.radians(margin_deg)
 
@@ -304,13 +305,15 @@ def _ud_margin_fn(psi0_deg, gap, s0, n, margin_deg, settings):
 
 @dataclasses.dataclass
 class GradientCheck:
-    """d(quantity)/d(beta) by implicit differentiation vs a central difference (step `h` rad)."""
+    """d(quantity)/d(beta) by implicit differentiation vs a central difference (step `h` rad);
+    `value` the quantity at beta (alpha_c1 in rad)."""
 
     name: str
     beta_deg: float
     grad: float
     fd: float
     h: float
+    value: float = float("nan")
 
     @property
     def rel_error(self):
@@ -319,16 +322,24 @@ class GradientCheck:
 
 def gradient_checks(psi0_deg, gap, beta_deg, *, s0=0.02, n=40, margin_deg=3.0, h=1e-4,
                     settings=Continuation()):
-    """Implicit gradients of alpha_c^(1) and of the landing margin m1 w.r.t. the held angle
-    beta, each against a central difference of the full (bisection + refinement) pipeline."""
+    """Implicit gradients w.r.t. the held angle beta (forward mode) of what the optimization
+    uses: alpha_c^L (the refined one-sided critical angle) and the half heights h_L, h_R of
+    the state at W1 (m1 = min(h_L, -h_R) itself has a kink at the optimum, where h_L = -h_R),
+    each against a central difference of the full pipeline (bisection, refinement, landing,
+    equilibrium at W1)."""
     f = _ud_margin_fn(psi0_deg, gap, s0, n, margin_deg, settings)
+
+    def vec(x):
+        _, aux = f(x)
+        return jnp.stack([aux["alpha_c"], aux["h"][0], aux["h"][2]])
+
+    prim = eqx.filter_jit(vec)
+    jac = eqx.filter_jit(jax.jacfwd(vec))
     b = jnp.asarray(math.radians(beta_deg))
-    out = []
-    for name, g in (("alpha_c1", lambda x: f(x)[1]["alpha_c"]), ("m1", lambda x: f(x)[0])):
-        gr = float(jax.grad(g)(b))
-        fd = (float(g(b + h)) - float(g(b - h))) / (2 * h)
-        out.append(GradientCheck(name, beta_deg, gr, fd, h))
-    return out
+    gr = np.asarray(jac(b))
+    val = np.asarray(prim(b))
+    fd = (np.asarray(prim(b + h)) - np.asarray(prim(b - h))) / (2 * h)
+    return [GradientCheck(nm, beta_deg, float(gr[i]), float(fd[i]), h, float(val[i])) for i, nm in enumerate(("alpha_c1", "h_L(W1)", "h_R(W1)"))]
 
 
 def optimize_hold(psi0_deg, gap, beta0_deg, *, bounds_deg=(-150.0, -60.0), s0=0.02, n=40, margin_deg=3.0,
@@ -368,32 +379,45 @@ def optimize_hold(psi0_deg, gap, beta0_deg, *, bounds_deg=(-150.0, -60.0), s0=0.
     return math.degrees(beta), m_best, hist, local
 
 
-def program_waypoints(psi0_deg, gap, beta_deg, *, s0=0.02, n=40, margin_deg=3.0, settings=Continuation()):
+def critical_angle_along(scene, theta, force, a_from_deg, a_far_deg, *, settings=MOVE_SETTINGS):
+    """The first loss of stability of the branch through (theta, force) at `a_from_deg` on the
+    straight move toward `a_far_deg` (deg): (alpha_L, alpha_R) at the critical point in deg
+    (bisection on the arclength to ~2^-48 of a step: exact to round-off at this mesh), the
+    half heights just before and after (landing), or None if the move does not snap."""
+    a0 = jnp.deg2rad(jnp.asarray(a_from_deg, float))
+    a1 = jnp.deg2rad(jnp.asarray(a_far_deg, float))
+    r = jax.tree.map(np.asarray, _segment(scene, theta, force, a0, a1, settings))
+    if not bool(r["snaps"]):
+        return None
+    return tuple(np.degrees(r["a_c"])), r["h_before"], r["h_after"]
+
+
+FAR_DEG = 170.0  # how far the critical-angle searches turn a clamp
+
+
+def program_waypoints(psi0_deg, gap, beta_deg, *, s0=0.02, n=40, margin_deg=3.0, settings=MOVE_SETTINGS):
     """The waypoints of the program (module docstring): the smallest moves that cross each
-    critical angle by `margin_deg`. Returns (waypoints, info) with info the critical angles
-    (deg) and whether their extended-system refinement converged; waypoints is None where
-    the down state at (beta, beta) is not found or a path does not snap."""
+    critical angle by `margin_deg`. The three critical angles (left clamp alone, right clamp
+    alone, both) of the down state at (beta, beta) are found on straight moves toward
+    `FAR_DEG`. Returns (waypoints, info) with info the critical angles (deg); waypoints is
+    None where the down state at (beta, beta) is not found or one of the paths does not snap."""
     base = jr.make_scene(psi0_deg, gap, beta_deg, s0=s0, n=n)
     eq0 = jr.initial_state(base, "down")
     info = {"down_state_found": bool(eq0.result == RESULTS.successful)}
     if not info["down_state_found"]:
         return None, info
+    w0 = (float(beta_deg), float(beta_deg))
+    far = {"L": (FAR_DEG, beta_deg), "R": (beta_deg, FAR_DEG), "sym": (FAR_DEG, FAR_DEG)}
     crit = {}
-    for nm, par in (("L", LeftAlpha()), ("R", RightAlpha())):
-        r = jax.tree.map(np.asarray, _one_sided(base, eq0.theta, eq0.force, 1.0, par, settings))
-        crit[nm] = math.degrees(float(r["alpha_c"])) if r["snaps"] else float("nan")
+    for nm, a_far in far.items():
+        c = critical_angle_along(base, eq0.theta, eq0.force, w0, a_far, settings=settings)
+        crit[nm] = float("nan") if c is None else (c[0][0] if nm != "R" else c[0][1])
         info[f"alpha_c_{nm}_deg"] = crit[nm]
-        info[f"alpha_c_{nm}_refined"] = bool(r["refined"])
-    sym = jr.snap_angles(jr.make_scene(psi0_deg, gap, 0.0, s0=s0, n=n), settings=settings)
-    crit["S"] = math.degrees(float(sym.up.alpha_c)) if bool(sym.up.snaps) else float("nan")
-    info["alpha_c_sym_deg"] = crit["S"]
-    info["alpha_c_sym_kind"] = KIND_NAMES[int(sym.up.kind)]
-    if not all(math.isfinite(v) for v in crit.values()) or crit["S"] <= beta_deg:
+    if not all(math.isfinite(v) for v in crit.values()):
         return None, info
-    w0 = (beta_deg, beta_deg)
-    wl = (crit["L"] + margin_deg, beta_deg)
-    wr = (beta_deg, crit["R"] + margin_deg)
-    ws = (crit["S"] + margin_deg, crit["S"] + margin_deg)
+    wl = (crit["L"] + margin_deg, float(beta_deg))
+    wr = (float(beta_deg), crit["R"] + margin_deg)
+    ws = (crit["sym"] + margin_deg, crit["sym"] + margin_deg)
     return [w0, wl, w0, wr, w0, ws, w0], info
 
 
@@ -433,8 +457,9 @@ def dynamic_ok(dm: DynamicMove, step: int, tol_distance=0.05, tol_kinetic=1e-4) 
 
 
 def simulate_program(scene, waypoints_deg, *, rate=1.0, settle=6.0, damping=3.0, n_frames=96, tol=1e-7,
-                     static_moves=None):
-    """Run the program dynamically (`jr.simulate`, Tsit5 at rtol = atol = `tol`), each move
+                     max_steps=400_000, static_moves=None):
+    """Run the program dynamically (`jr.simulate`, Tsit5 at rtol = atol = `tol`, passed
+    explicitly), each move
     from rest in the state the previous one settled in. `static_moves`: the quasi-static
     reports of the same program at the same mesh, for `distance_to_static`."""
     _check_n(scene.mesh.n)
@@ -452,14 +477,15 @@ def simulate_program(scene, waypoints_deg, *, rate=1.0, settle=6.0, damping=3.0,
         t1 = T + settle
         tr = jr.simulate(_at(scene, jnp.asarray(a0)), theta, proto, t1=jnp.asarray(t1), stop_at_snap=False,
                          dissipation=jr.Dissipation(damping=damping), rtol=jnp.asarray(tol),
-                         atol=jnp.asarray(tol), n_frames=n_frames, n_fine=2048)
+                         atol=jnp.asarray(tol), n_frames=n_frames, n_fine=2048, solver="tsit5",
+                         max_steps=max_steps)
         x = np.asarray(tr.positions)
         h = x[:, [n // 4, n // 2, 3 * n // 4], 1]
         letters = [half_state(hh) for hh in h]
         flips = frozenset().union(*(flipped(letters[0], s) for s in letters))
         theta = jnp.asarray(np.asarray(tr.theta)[-1])
         kin = np.asarray(tr.kinetic)
-        kin_end = float(kin[np.isfinite(kin)][-1])
+        kin_end = float(kin[np.isfinite(kin)][-1]) if np.isfinite(kin).any() else float("nan")
         dist = float("nan")
         if static_moves is not None:
             dist = float(np.sqrt(np.sum(w * (np.asarray(theta) - static_moves[k].theta) ** 2)))
