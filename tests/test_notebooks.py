@@ -47,6 +47,13 @@ def test_notebook_02_snap_angle_design():
     assert "'reached': True" in out and "target not reached" in out
 
 
+@pytest.mark.slow  # ~4 min in quick mode on 2 busy cores; its functions are tested in test_reproduce.py
+def test_notebook_05_paper_figures():
+    out = _text(_run("05_paper_figures.ipynb"))
+    assert "quick mode" in out and "jaxrod's plane:" in out and "which part jumps:" in out
+    assert "not available" not in out
+
+
 @pytest.mark.slow
 def test_notebook_03_snap_speed_design():
     out = _text(_run("03_snap_speed_design.ipynb"))
