@@ -61,6 +61,13 @@ def test_notebook_03_snap_speed_design():
     assert "fastest snap found" in out
 
 
+@pytest.mark.slow  # ~4 min in quick mode on 2 busy cores (110 s CPU); its functions are tested in test_actuator.py
+def test_notebook_04_programmable_actuator():
+    out = _text(_run("04_programmable_actuator.ipynb"))
+    assert "quick mode" in out and "outcome: reached" in out and "not reached: N = 24 step 1" in out
+    assert "FAILED" not in out
+
+
 def test_notebooks_committed_without_outputs():
     for path in sorted(NB.glob("*.ipynb")):
         nb = nbformat.read(path, as_version=4)
