@@ -13,18 +13,20 @@ path is still continuous is a *drift*, not a snap, and disqualifies the move.
 other held at $\alpha=0$ (the protocol of `jr.snap_dynamics(kind="asymmetric")`) the down
 state loses stability at a fold ($\alpha_L\approx46.4^\circ$ for $\Psi_0=60^\circ$, $G/L=0.5$)
 and lands in the *up state*: both letters flip (``DD -> UU``), and the half far from the
-moving clamp is the one that moves most (tangent-angle change $L^2$ 1.48 vs 1.24 rad). A
+moving clamp is the one that moves most (tangent-angle change $L^2$ 1.48 vs 1.24 rad at
+N = 40; cf. the paper: rotating the left clamp propels the right-most ball). A
 left-half-only snap therefore needs the held clamp tilted down: with $\alpha_R=\beta\lesssim
--90^\circ$ (and a tight enough fold, e.g. $\Psi_0=45^\circ$, $G/L=0.5$, $\beta=-120^\circ$) the
-fold of the one-sided path lands in a mixed ``UD`` state whose right quarter stays below
-the clamp line. `actuator_study` finds such a program and reports ``reached=False`` where
-none of its moves does what it says (e.g. at $\beta=0$).
+-90^\circ$ (and a tight enough fold; the default design $\Psi_0=45^\circ$, $G/L=0.5$ has its
+optimum at $\beta=-126.26^\circ$) the fold of the one-sided path lands in a mixed ``UD`` state
+whose right quarter stays below the clamp line. `actuator_study` builds such a program and
+reports "not reached" with the first step that does not do what it says (e.g. step 1 at
+$\beta=0$, which lands in ``UU``).
 
 The up-state branch is continuous in $\alpha_R$: raising the right clamp from
 ``UD`` lifts the right half *without* a snap (``UD -> UU`` continuously), so a
 "then the right half" step cannot start from ``UD``. The program therefore returns to the
-down state between actuations, as the paper's experiment does (three separate snaps, each
-propelling one ball).
+down state between actuations (the paper's experiment also consists of three separate
+snaps, each propelling one ball).
 
 **The program.** Straight moves in the clamp-angle plane $(\alpha_L,\alpha_R)$ between
 waypoints, starting at $W_0=(\beta,\beta)$ in the down state ``DD``:
