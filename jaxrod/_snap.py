@@ -9,8 +9,11 @@ quasi-static hysteresis protocol.
 
 The critical point between the last stable and the first unstable point is refined by
 bisection on the arclength along the stable point's tangent (each trial is a corrector
-solve plus one Sturm count), to $\Delta s\sim 2^{-48}$ of the step, so $\alpha_c$ is exact to
-round-off at the given mesh. Its kind: under symmetric actuation, a *branch point* if
+solve plus one Sturm count), to $\Delta s\sim 2^{-24}$ of the step ($\lesssim 10^{-8}$ in $\alpha$),
+then polished by Newton on the extended system (`jaxrod.critical_point`), which is accepted
+only within $10^{-6}$ rad of the bisection point, so $\alpha_c$ is exact to round-off at the given
+mesh. (48 bisections gave the same $\alpha_c$ to 1e-10 deg at 3x the cost; 16 left the
+bisection point up to 3e-6 rad away, outside the acceptance.) Its kind: under symmetric actuation, a *branch point* if
 the mode that goes unstable is mirror-asymmetric, a *fold* (limit point in $\alpha$) if it
 is symmetric; under one-sided actuation, a fold.
 """
@@ -216,7 +219,7 @@ class SnapAngles(eqx.Module):
 
 @eqx.filter_jit
 def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float = jnp.pi,
-                bisections: int = 48) -> SnapAngles:
+                bisections: int = 24) -> SnapAngles:
     r"""Critical clamp angles $\alpha_{c,\rm up}>0$ and $\alpha_{c,\rm down}<0$ of a scene
     under symmetric clamp rotation, their kinds, the states just before and after.
 
