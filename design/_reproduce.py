@@ -111,6 +111,74 @@ def section_no_snap(cache, n, out, progress):
     return "No snap at Psi0 = 30 deg, G/L = 0.8", "Smooth transition expected (paper).", rows, a
 
 
+def _loop_record(psi0_deg, gap, n, s0=0.02):
+    """The two quasi-static paths of `jr.snap_angles` (stable continuation stages up to the
+    snap: alpha in deg, fold height) and the jumps (fold height before -> after)."""
+    import jaxrod as jr
+
+    r = jr.snap_angles(_scene(psi0_deg, gap, n, s0))
+    rec = {}
+    for d, p in (("up", r.up), ("down", r.down)):
+        br = p.branch
+        stages = []
+        for k in range(int(np.asarray(br.count).shape[0])):
+            c = int(br.count[k])
+            if c > 0:
+                stages.append({"alpha_deg": np.degrees(np.asarray(br.lam[k, :c])).round(5).tolist(),
+                               "fold_height": np.asarray(br.fold_height[k, :c]).round(6).tolist(),
+                               "unstable": np.asarray(br.num_unstable[k, :c]).astype(int).tolist()})
+        snaps = bool(p.snaps)
+        rec[d] = {"snaps": snaps, "alpha_c": _deg(p.alpha_c) if snaps else None, "stages": stages,
+                  "kind": jr.KIND_NAMES[int(p.kind)],
+                  "before": float(p.fold_height_before) if snaps else None,
+                  "after": float(p.fold_height_after) if snaps else None}
+    return rec
+
+
+def section_loops(cache, n, out, progress):
+    """Figs. 2a-b: fold height against alpha on both quasi-static paths at Psi0 = 60 deg,
+    G/L = 0.5 and Psi0 = 30 deg, G/L = 0.8 (`jr.snap_angles`' continuation branches)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    cases = [(60.0, 0.5), (30.0, 0.8)]
+    recs = {c: cache.get(f"loop/{c[0]:g}/{c[1]:g}/{n}", lambda c=c: _loop_record(*c, n)) for c in cases}
+    fig = Figure(figsize=(10, 3.8))
+    FigureCanvasAgg(fig)
+    for i, (c, rec) in enumerate(recs.items()):
+        ax = fig.add_subplot(1, 2, i + 1)
+        for d, col, lab in (("up", "C0", "snap-up path (from the down state)"),
+                            ("down", "C3", "snap-down path (from the up state)")):
+            for k, st in enumerate(rec[d]["stages"]):
+                a, y, u = (np.asarray(st[key]) for key in ("alpha_deg", "fold_height", "unstable"))
+                ax.plot(np.where(u == 0, a, np.nan), y, "-", color=col, label=lab if k == 0 else None)
+                ax.plot(np.where(u > 0, a, np.nan), y, ":", color=col, lw=0.8)
+            if rec[d]["snaps"]:
+                ax.annotate("", (rec[d]["alpha_c"], rec[d]["after"]), (rec[d]["alpha_c"], rec[d]["before"]),
+                            arrowprops=dict(arrowstyle="->", color=col))
+        ax.axhline(0, color="k", lw=0.4)
+        ax.set_xlabel("alpha (deg)")
+        ax.set_ylabel("fold height y(L/2) / L")
+        ax.set_title(f"Psi0 = {c[0]:g} deg, G/L = {c[1]:g} (N = {n})", fontsize=9)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out, "fig2ab_loops.png"), dpi=110)
+    a = recs[(60.0, 0.5)]
+    rows = []
+    if a["up"]["snaps"] and a["down"]["snaps"]:
+        ju, jd = abs(a["up"]["after"] - a["up"]["before"]), abs(a["down"]["after"] - a["down"]["before"])
+        rows.append(("fold-height jump, snap up vs snap down, Psi0 = 60 deg, G/L = 0.5",
+                     "snap down: the smaller jump", f"{ju:.3f} L up, {jd:.3f} L down",
+                     "snap down smaller" if jd < ju else "snap down NOT smaller"))
+    b = recs[(30.0, 0.8)]
+    rows.append(("Psi0 = 30 deg, G/L = 0.8: fold height along alpha", "smooth, both directions",
+                 "smooth (no loss of stability)" if not (b["up"]["snaps"] or b["down"]["snaps"]) else "snaps", ""))
+    text = ("Fold height on the two quasi-static paths (stable: solid, unstable: dotted; arrows: the snaps, "
+            f"from the critical state to where it lands), N = {n}. ![loops](fig2ab_loops.png)")
+    return "Quasi-static loops (Figs. 2a-b)", text, rows, {f"{c[0]:g}/{c[1]:g}": {
+        d: {k: v for k, v in r[d].items() if k != "stages"} for d in ("up", "down")} for c, r in recs.items()}
+
+
 def section_master_curves(cache, n, out, progress, quick=False):
     psis = (30.0, 60.0, 90.0, 180.0) if quick else (30.0, 45.0, 60.0, 90.0, 120.0, 180.0)
     gaps = np.round(np.linspace(0.1, 0.9, 5 if quick else 17), 4)
@@ -519,7 +587,7 @@ def run(out, quick=False, progress=True):
     n = 60 if quick else 200
     cfg = dynamics_config(quick)
     cache = _Cache(os.path.join(out, "cache.json"))
-    sections = [section_snap_angles, section_no_snap,
+    sections = [section_snap_angles, section_no_snap, section_loops,
                 lambda c, n, o, p: section_master_curves(c, n, o, p, quick=quick)]
     sections += [lambda c, n, o, p, f=f: f(c, o, p, cfg) for f in
                  (section_snap_dynamics, section_speed_plane, section_folded_unfolded, section_asymmetric)]

@@ -91,3 +91,18 @@ def test_resume_recomputes_nothing(report, monkeypatch):
         again = f(cache, str(out), False, CFG)
         assert again[2] == secs[f.__name__][2], f.__name__
     assert json.loads((out / "cache.json").read_text()) == cache.data
+
+
+def test_loops_figure_2ab(tmp_path):
+    cache = rp._Cache(str(tmp_path / "cache.json"))
+    title, _, rows, data = rp.section_loops(cache, 24, str(tmp_path), False)
+    a = data["60/0.5"]
+    assert a["up"]["snaps"] and a["down"]["snaps"] and a["up"]["alpha_c"] > 0 > a["down"]["alpha_c"]
+    ju, jd = abs(a["up"]["after"] - a["up"]["before"]), abs(a["down"]["after"] - a["down"]["before"])
+    assert a["up"]["before"] < 0 < a["up"]["after"] and a["down"]["after"] < 0 < a["down"]["before"]
+    assert jd < ju and rows[0][3] == "snap down smaller"  # the paper: the snap-down jump is the smaller one
+    b = data["30/0.8"]
+    assert not b["up"]["snaps"] and not b["down"]["snaps"] and rows[1][2].startswith("smooth")
+    stages = cache.data["loop/60/0.5/24"]["up"]["stages"]
+    assert stages and all(len(s["alpha_deg"]) == len(s["fold_height"]) > 2 for s in stages)
+    assert (tmp_path / "fig2ab_loops.png").stat().st_size > 1000
