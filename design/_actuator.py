@@ -54,6 +54,7 @@ $m_1=\min(h_L,-h_R)$ of ``UD`` at $W_1$.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 
@@ -305,6 +306,23 @@ def _ud_margin_fn(psi0_deg, gap, s0, n, margin_deg, settings):
     return f
 
 
+@functools.lru_cache(maxsize=8)
+def _margin_tools(psi0_deg, gap, s0, n, margin_deg, settings):
+    """Jitted (values, jacobian) of beta -> (alpha_c^L, h_L(W1), h_R(W1), snapped), memoized
+    so that the optimizer and the gradient check share one compilation of each."""
+    f = _ud_margin_fn(psi0_deg, gap, s0, n, margin_deg, settings)
+
+    def vec(x):
+        _, aux = f(x)
+        return jnp.stack([aux["alpha_c"], aux["h"][0], aux["h"][2]])
+
+    def prim(x):
+        _, aux = f(x)
+        return vec(x), aux["snaps"]
+
+    return eqx.filter_jit(prim), eqx.filter_jit(jax.jacfwd(vec))
+
+
 @dataclasses.dataclass
 class GradientCheck:
     """d(quantity)/d(beta) by implicit differentiation vs a central difference (step `h` rad);
@@ -329,18 +347,11 @@ def gradient_checks(psi0_deg, gap, beta_deg, *, s0=0.02, n=40, margin_deg=3.0, h
     the state at W1 (m1 = min(h_L, -h_R) itself has a kink at the optimum, where h_L = -h_R),
     each against a central difference of the full pipeline (bisection, refinement, landing,
     equilibrium at W1)."""
-    f = _ud_margin_fn(psi0_deg, gap, s0, n, margin_deg, settings)
-
-    def vec(x):
-        _, aux = f(x)
-        return jnp.stack([aux["alpha_c"], aux["h"][0], aux["h"][2]])
-
-    prim = eqx.filter_jit(vec)
-    jac = eqx.filter_jit(jax.jacfwd(vec))
+    prim, jac = _margin_tools(float(psi0_deg), float(gap), float(s0), int(n), float(margin_deg), settings)
     b = jnp.asarray(math.radians(beta_deg))
     gr = np.asarray(jac(b))
-    val = np.asarray(prim(b))
-    fd = (np.asarray(prim(b + h)) - np.asarray(prim(b - h))) / (2 * h)
+    val = np.asarray(prim(b)[0])
+    fd = (np.asarray(prim(b + h)[0]) - np.asarray(prim(b - h)[0])) / (2 * h)
     return [GradientCheck(nm, beta_deg, float(gr[i]), float(fd[i]), h, float(val[i])) for i, nm in enumerate(("alpha_c1", "h_L(W1)", "h_R(W1)"))]
 
 
@@ -352,32 +363,31 @@ def optimize_hold(psi0_deg, gap, beta0_deg, *, bounds_deg=(-150.0, -60.0), s0=0.
     decreases): safeguarded Newton on $d$ with its implicit derivative (clipped to the bounds).
     Returns (beta_deg, m1, history [(beta_deg, m1, d, dd/dbeta per rad)], local) with `local`
     True if m1 at the result is at least m1 at beta +- 1 deg (checked by evaluation)."""
-    f = _ud_margin_fn(psi0_deg, gap, s0, n, margin_deg, settings)
+    prim, jac = _margin_tools(float(psi0_deg), float(gap), float(s0), int(n), float(margin_deg), settings)
 
-    def dfun(x):
-        m1, aux = f(x)
-        return aux["h"][0] + aux["h"][2], (m1, aux)
+    def m1_of(x):
+        v, snaps = prim(jnp.asarray(x))
+        v = np.asarray(v)
+        return (float(min(v[1], -v[2])) if bool(snaps) else float("nan")), v
 
-    vg = eqx.filter_jit(jax.value_and_grad(dfun, has_aux=True))
     lo, hi = (math.radians(v) for v in bounds_deg)
     beta = float(np.clip(math.radians(beta0_deg), lo, hi))
     hist = []
-    m1 = float("nan")
     for _ in range(max_iter):
-        (dv, (m1v, aux)), g = vg(jnp.asarray(beta))
-        dv, g, m1 = float(dv), float(g), float(m1v)
+        m1, v = m1_of(beta)
+        J = np.asarray(jac(jnp.asarray(beta)))
+        dv, g = float(v[1] + v[2]), float(J[1] + J[2])
         hist.append((math.degrees(beta), m1, dv, g))
-        if not (math.isfinite(dv) and math.isfinite(g) and bool(aux["snaps"])) or g == 0.0:
+        if not (math.isfinite(m1) and math.isfinite(dv) and math.isfinite(g)) or g == 0.0:
             break
         new = float(np.clip(beta - dv / g, lo, hi))
         if abs(new - beta) < math.radians(tol_deg):
             beta = new
             break
         beta = new
-    mfun = eqx.filter_jit(lambda x: f(x)[0])
-    m_best = float(mfun(jnp.asarray(beta)))
-    side = [float(mfun(jnp.asarray(beta + s * math.radians(1.0)))) for s in (-1.0, 1.0)]
-    local = bool(math.isfinite(m_best) and all(not math.isfinite(v) or m_best >= v for v in side))
+    m_best = m1_of(beta)[0]
+    side = [m1_of(beta + sg * math.radians(1.0))[0] for sg in (-1.0, 1.0)]
+    local = bool(math.isfinite(m_best) and all(not math.isfinite(x) or m_best >= x for x in side))
     return math.degrees(beta), m_best, hist, local
 
 
@@ -574,8 +584,9 @@ def actuator_study(psi0_deg=45.0, gap=0.5, beta_deg=-120.0, *, optimize=True, be
     the landing margin m1 on `n` segments; the waypoints are the smallest moves past each
     critical angle by `margin_deg`. The program is then run quasi-statically at `n`,
     independently re-solved at `n_check`, and (with `dynamics`) integrated with
-    `jr.simulate` at `n_dyn`. `outcome` says "not reached: ..." with the first failing step
-    where any of them does not do what it says."""
+    `jr.simulate` at `n_dyn`, each stage only if the previous one did what it says.
+    `outcome` says "not reached: ..." with the first failing step (and the mesh or the
+    dynamics where it failed)."""
     for nm, v in (("n", n), ("n_check", n_check), ("n_dyn", n_dyn)):
         _check_n(v)
     timings, hist, grads, info_opt = {}, [], [], {}
@@ -602,13 +613,16 @@ def actuator_study(psi0_deg=45.0, gap=0.5, beta_deg=-120.0, *, optimize=True, be
         res.outcome = ("not reached: no down state at (beta, beta)" if not info.get("down_state_found", True)
                        else "not reached: a critical angle of the program does not exist (a path does not snap)")
         return res
-    for tag, nn, attr in (("", n, "moves"), ("check", n_check, "check")):
+    fail = None
+    for nn, attr in ((n, "moves"), (n_check, "check")):
         t1 = time.perf_counter()
         _, reps = run_program(jr.make_scene(psi0_deg, gap, 0.0, s0=s0, n=nn), wp)
         setattr(res, attr, reps)
         timings[attr] = time.perf_counter() - t1
         say(f"quasi-static program at N = {nn}: " + ", ".join(f"{r.start}->{r.final}" for r in reps))
-    fail = _first_failure(res.moves, move_ok, f"N = {n}") or _first_failure(res.check, move_ok, f"N = {n_check}")
+        fail = _first_failure(reps, move_ok, f"N = {nn}")
+        if fail is not None:  # the finer check (and the dynamics) of a failed program are not run
+            break
     if dynamics and fail is None:
         t1 = time.perf_counter()
         scd = jr.make_scene(psi0_deg, gap, 0.0, s0=s0, n=n_dyn)

@@ -104,6 +104,16 @@ def test_gradients_match_central_differences(program):
         assert g.rel_error < 1e-5, g
 
 
+def test_optimized_held_angle():
+    """Newton on h_L + h_R = 0 (the implicit derivative shared with the gradient check) from
+    beta = -110 deg converges to the balanced landing, a local maximum of m1 = min(h_L, -h_R)
+    that beats the start, inside the bounds."""
+    beta, m1, hist, local = act.optimize_hold(PSI0, GAP, -110.0, n=N)
+    assert -150.0 < beta < -60.0 and local
+    assert abs(hist[-1][2]) < 1e-8 and len(hist) <= 8, hist
+    assert m1 > hist[0][1] + 0.01, hist
+
+
 def test_flat_held_clamp_is_not_a_selective_actuator():
     """With the other clamp held flat (beta = 0, the protocol of snap_dynamics(kind='asymmetric'))
     the one-sided snap flips both halves (DD -> UU): the study says "not reached" at step 1."""
