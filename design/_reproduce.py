@@ -478,7 +478,8 @@ def section_folded_unfolded(cache, out, progress, cfg):
     for tr, rec, c, lab in ((tf, fold, "C3", "Psi0 = 30 deg"), (tl, flat, "k", "no fold (mid-point)")):
         t = np.asarray(tr.t)
         ok = np.isfinite(t) & np.isfinite(np.asarray(tr.fold_speed))
-        ax.plot(t[ok] - rec["t_peak"], np.asarray(tr.fold_speed)[ok], color=c, label=f"{lab}: v_s = {rec['v_s']:.1f} v*")
+        ax.plot(t[ok] - rec["t_peak"], np.asarray(tr.fold_speed)[ok], color=c,
+                label=f"{lab}: v_s = {rec['v_s']:.1f} v*")
     ax.set_xlim(-0.4, 0.1)
     ax.set_xlabel("t - t_peak (T)")
     ax.set_ylabel("fold speed / v*")
