@@ -352,7 +352,8 @@ def gradient_checks(psi0_deg, gap, beta_deg, *, s0=0.02, n=40, margin_deg=3.0, h
     gr = np.asarray(jac(b))
     val = np.asarray(prim(b)[0])
     fd = (np.asarray(prim(b + h)[0]) - np.asarray(prim(b - h)[0])) / (2 * h)
-    return [GradientCheck(nm, beta_deg, float(gr[i]), float(fd[i]), h, float(val[i])) for i, nm in enumerate(("alpha_c1", "h_L(W1)", "h_R(W1)"))]
+    names = ("alpha_c1", "h_L(W1)", "h_R(W1)")
+    return [GradientCheck(nm, beta_deg, float(gr[i]), float(fd[i]), h, float(val[i])) for i, nm in enumerate(names)]
 
 
 def optimize_hold(psi0_deg, gap, beta0_deg, *, bounds_deg=(-150.0, -60.0), s0=0.02, n=40, margin_deg=3.0,

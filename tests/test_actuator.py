@@ -7,8 +7,6 @@ CI versions at N = 24 (checks at N = 48); the converged study is marked slow."""
 
 import math
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 
