@@ -4,8 +4,10 @@ mesh), study (b) (fastest snap with G/L >= 0.3), an unreachable target, the CLI.
 
 CI versions run at N = 16 with the check at N = 24 (snap_speed at N = 16 is 2 % above the
 converged v_s at Psi0 = 90 deg; N = 16 -> 24 moves it by 0.4 %); the design-mesh versions
-(N = 48, check at N = 96) are marked slow. Every study compiles its own problem (about
-20-40 s each), which is most of this file's time."""
+(N = 48, check at N = 96) are marked slow. Every study compiles its own problem (40-50 s of
+CPU each: snap_angles, the critical point's implicit derivative, the run and its reverse
+pass), which is nearly all of this file's time; the CI gradient check reuses study (b)'s
+compiled problem, the CLI test study (c)'s."""
 
 import json
 import math
@@ -64,9 +66,40 @@ def _check_gradient(n, rtol):
     return float(v), g
 
 
+def _study_b_problem(n):
+    """The problem `fastest_snap_study(0.3, n=n)` builds (same static fields: one compile)."""
+    param = ds.Parametrization(free=("psi0_deg", "gap"), bounds={"psi0_deg": (10.0, 180.0), "gap": (0.3, 0.95)},
+                               fixed={"s0": 0.02})
+    return ds.Problem((ds.SnapSpeed(100.0, tol=1.0),), param, n)
+
+
+def test_snap_speed_gradient_in_the_design_loop_matches_central_differences():
+    """The Jacobian the design loop uses (jacfwd through snap_speed's custom JVP, in the
+    unconstrained z of the parametrization, the compiled function of study (b)) vs central
+    differences of the same function's residual r = v_s - 100. z steps 4e-4, 8e-4 are
+    3e-4 rad in Psi0 and 1e-4 in G/L at (90 deg, 0.46): the N = 16 steps above."""
+    from design._optimize import _linearize_batch
+
+    problem = _study_b_problem(N)
+    z0 = problem.param.from_values(psi0_deg=90.0, gap=0.46)
+    r, J, v = (np.asarray(a)[0] for a in _linearize_batch(problem, z0[None]))
+    assert math.isfinite(v[0]) and v[0] > 5.0
+    fd = []
+    for j, h in enumerate((4e-4, 8e-4)):
+        e = np.zeros(2)
+        e[j] = h
+        rp = float(np.asarray(_linearize_batch(problem, (z0 + e)[None])[0])[0, 0])
+        rm = float(np.asarray(_linearize_batch(problem, (z0 - e)[None])[0])[0, 0])
+        fd.append((rp - rm) / (2 * h))
+    np.testing.assert_allclose(J[0], np.array(fd), rtol=1e-4)
+    assert np.all(np.abs(J[0]) > 1.0)
+
+
+@pytest.mark.slow
 def test_snap_speed_gradient_matches_central_differences():
-    """d v_s / d(Psi0, G, s0) by jax.jacfwd (custom JVP: one reverse pass through the
-    implicitly differentiated critical state and the fixed-step run) vs central differences."""
+    """d v_s / d(Psi0, G, s0) of jr.snap_speed by jax.jacfwd (custom JVP: one reverse pass
+    through the implicitly differentiated critical state and the fixed-step run) vs central
+    differences, N = 16 (slow only because it is one more compile than the CI file needs)."""
     _check_gradient(N, rtol=1e-4)
 
 
