@@ -150,8 +150,8 @@ def main():
             "Brink snap of Psi0 = 30 deg, G/L = 0.5, s0 = 0.02 (nudge 0.05 rad along the unstable mode, clamps "
             "1e-3 rad past alpha_c). Reference v_s per N: " + info["reference"] + " (Tsit5 at 1e-10 was too slow at "
             "N = 200 on this machine). Wall time: compiled run, median of the repeats (one run for N >= 100). "
-            "Kvaerno5 (dense-Jacobian Newton) only at N <= 50. rattle (the default): fixed step, the largest divisor "
-            "of the fine-grid spacing 3/16383 below Courant * h^2.", "",
+            "Kvaerno5 (dense-Jacobian Newton) only at N <= 50. rattle (the default): fixed step min(Courant h^2, 2e-4) T, "
+            "every step sampled (its default n_fine).", "",
             f"Machine shared with other agents' jobs while measured: load average (1, 5, 15 min) "
             f"{tuple(round(x, 2) for x in load0)} at the start, {tuple(round(x, 2) for x in load1)} at the end, on "
             f"{info['cpus']} cores; wall times are upper bounds. Total {info['total_s'] / 60:.1f} min.", "",
