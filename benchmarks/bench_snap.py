@@ -16,9 +16,8 @@ the hysteresis loop (snap up from the down state, snap down from the up state).
   |alpha_N - alpha_{N/2}| / 3 of the discretization error is below 0.002 deg; alpha_c
   converges as N^-2; N/2 is run too, for that estimate).
 * phase diagram -- Psi0 = 30, 60, 90, 120, 180 deg x G/L = 0.1:0.02:0.9 (41 gaps),
-  `jr.phase_diagram` (one jitted `lax.map` of snap_angles over the gaps per Psi0, two Psi0
-  at a time in two threads) at N = 100: run time after a first (compiling) call, and with
-  one worker.
+  `jr.phase_diagram` (one jitted `lax.map` of snap_angles over the gaps per Psi0) at
+  N = 100: run time after a first (compiling) call.
 * naive -- alpha in 0.1 deg steps from alpha = 0; at each step `jr.solve_equilibrium`
   (plain Newton from the previous solution) and dense `eigvalsh` of
   `jr.dense_reduced_hessian`; stops at the first step whose smallest eigenvalue is
@@ -146,22 +145,18 @@ def bench_extrapolated(n, repeats, log):
 
 
 def bench_phase(n, psi0s, gaps, log):
-    """`jr.phase_diagram` as a user calls it (its chunks run two at a time on two cores):
-    compile = a first call on one Psi0, run = the whole grid after that."""
+    """`jr.phase_diagram` as a user calls it: compile = a first call on one Psi0, run = the
+    whole grid after that."""
     t0 = time.perf_counter()
     jr.phase_diagram(psi0s[:1], gaps, n=n, progress=False)
     tc = time.perf_counter() - t0
     t0 = time.perf_counter()
     ds = jr.phase_diagram(psi0s, gaps, n=n, progress=False)
     total = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    jr.phase_diagram(psi0s, gaps, n=n, progress=False, workers=1)
-    total1 = time.perf_counter() - t0
     up, down = np.asarray(ds["alpha_c_up"]), np.asarray(ds["alpha_c_down"])
-    log(f"  phase diagram {len(psi0s)} x {len(gaps)} at N={n}: compile {tc:.1f} s, run {total:.2f} s "
-        f"(one worker: {total1:.2f} s)")
+    log(f"  phase diagram {len(psi0s)} x {len(gaps)} at N={n}: compile {tc:.1f} s, run {total:.2f} s")
     return dict(N=n, psi0_deg=list(psi0s), gaps=[float(g) for g in gaps], compile_s=tc, run_s=total,
-                run_one_worker_s=total1, per_scene_ms=1e3 * total / (len(psi0s) * len(gaps)),
+                per_scene_ms=1e3 * total / (len(psi0s) * len(gaps)),
                 alpha_c_up_deg=np.where(np.isnan(up), None, up).tolist(),
                 alpha_c_down_deg=np.where(np.isnan(down), None, down).tolist(),
                 kind_up=np.asarray(ds["kind_up"]).tolist(), kind_down=np.asarray(ds["kind_down"]).tolist())
@@ -352,10 +347,9 @@ def write_md(res, path):
                  f"> {1e3 * t['timeout_s']:.0f} | |")
     ph = res.get("phase")
     if ph:
-        one = f" (one worker: {ph['run_one_worker_s']:.2f} s)" if "run_one_worker_s" in ph else ""
         L += ["", f"Phase diagram: {len(ph['psi0_deg'])} Psi0 x {len(ph['gaps'])} gaps at N = {ph['N']}, `jr.phase_diagram` "
-              f"(a jitted `lax.map` of `snap_angles` over the gaps per Psi0, two Psi0 at a time): **{ph['run_s']:.2f} s** "
-              f"run{one} ({ph['per_scene_ms']:.0f} ms per scene), compile {ph['compile_s']:.1f} s; target 5 s: "
+              f"(a jitted `lax.map` of `snap_angles` over the gaps per Psi0): **{ph['run_s']:.2f} s** "
+              f"run ({ph['per_scene_ms']:.0f} ms per scene), compile {ph['compile_s']:.1f} s; target 5 s: "
               f"**{'PASS' if ph['run_s'] <= 5.0 else 'FAIL'}**."]
     ex = res.get("extrapolated")
     if ex:

@@ -97,17 +97,13 @@ def _write(ds, path):
     os.replace(tmp, path)  # atomic: an interrupted write never leaves a half chunk
 
 
-def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progress=True, on_chunk=None,
-                  workers=None):
+def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progress=True, on_chunk=None):
     r"""Critical clamp angles over the grid `psi0_deg` x `gaps` (an `xarray.Dataset`).
 
     **Arguments:** `psi0_deg` fold angles in (0, 180] (degrees), `gaps` values of $G/L$ in
     (0, 1), `s0`, `n`, `refine` as in [`jaxrod.make_scene`][]; `out` a directory for the
     resumable chunk files and `phase_diagram.nc`; `progress` a tqdm bar;
-    `on_chunk(psi0_deg, computed: bool)` called after each chunk (in the calling thread);
-    `workers` how many chunks run at once (default: 2 if the machine has >= 2 cores, else
-    1): each chunk is one sequential compiled call, so two Python threads (JAX releases
-    the GIL while it runs) keep two cores busy.
+    `on_chunk(psi0_deg, computed: bool)` called after each chunk.
 
     **Returns:** dataset with dims `(psi0, gap)`: `alpha_c_up`, `alpha_c_down` (degrees,
     NaN where the path does not snap), `kind_up`/`kind_down` (0 none, 1 fold, 2 branch
@@ -134,51 +130,23 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
         os.makedirs(os.path.join(out, "chunks"), exist_ok=True)
     g_arr = jnp.asarray(gaps, jnp.float64)
     s0_arr = jnp.asarray(float(s0), jnp.float64)
-    chunks, computed = {}, []
-    bar = None
+    chunks, computed = [], []
+    it = psis
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(psis), desc="phase diagram", unit="Psi0")
-
-    def compute(p):
-        vals = jax.device_get(_chunk(jnp.asarray(math.radians(p), jnp.float64), g_arr, s0_arr, mesh))
-        ds = _chunk_dataset(p, gaps, vals, attrs)
-        if out is not None:
-            _write(ds, _chunk_path(out, p))
-        return ds
-
-    def finished(p, ds, was_computed):
-        chunks[p] = ds
-        if was_computed:
-            computed.append(p)
-        if bar is not None:
-            bar.update(1)
-        if on_chunk is not None:
-            on_chunk(p, was_computed)
-
-    todo = []
-    for p in psis:
+        it = tqdm(psis, desc="phase diagram", unit="Psi0")
+    for p in it:
         ds = _read_chunk(_chunk_path(out, p), attrs) if out is not None else None
         if ds is None:
-            todo.append(p)
-        else:
-            finished(p, ds, False)
-    if workers is None:
-        workers = 2 if (os.cpu_count() or 1) >= 2 else 1
-    if todo and workers > 1 and len(todo) > 1:
-        from concurrent.futures import ThreadPoolExecutor, as_completed
-
-        with ThreadPoolExecutor(max_workers=int(workers)) as pool:
-            futures = {pool.submit(compute, p): p for p in todo}
-            for f in as_completed(futures):
-                finished(futures[f], f.result(), True)
-    else:
-        for p in todo:
-            finished(p, compute(p), True)
-    if bar is not None:
-        bar.close()
-    chunks = [chunks[p] for p in psis]
+            vals = jax.device_get(_chunk(jnp.asarray(math.radians(p), jnp.float64), g_arr, s0_arr, mesh))
+            ds = _chunk_dataset(p, gaps, vals, attrs)
+            if out is not None:
+                _write(ds, _chunk_path(out, p))
+            computed.append(p)
+        chunks.append(ds)
+        if on_chunk is not None:
+            on_chunk(p, p in computed)
     full = xr.concat(chunks, dim="psi0")
     full.attrs = dict(attrs, units="alpha in degrees, G/L and fold heights in units of L",
                       kinds="0 none, 1 fold, 2 branch_point")

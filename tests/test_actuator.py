@@ -61,6 +61,7 @@ def test_program_does_what_it_says(moves):
     assert len(left.events) == 1 and len(both.events) == 1
 
 
+@pytest.mark.slow  # a second mesh compile; the converged study (slow) re-checks at N = 160 too
 def test_program_rechecked_at_finer_mesh(program, moves):
     """An independent quasi-static run of the same waypoints on twice the segments: every step
     still does what it says; each actuation snap moves by less than the 3 deg margin the waypoints

@@ -175,6 +175,7 @@ def test_unreachable_speed_target_says_not_reached():
     assert r.to_dict()["reached"] is False
 
 
+@pytest.mark.slow  # its own compile of the design loop (~50 s); study (c) and the gradient run in CI
 def test_study_b_respects_the_bound_and_beats_the_start():
     r = ds.fastest_snap_study(0.3, n=N, n_check=N_CHECK, max_iter=5, progress=False)
     assert r.design.gap >= 0.3 and r.bound_respected
