@@ -91,6 +91,7 @@ def test_dynamic_program_small_n(program, moves):
     assert dyn[4].v_peak > dyn[0].v_peak  # the symmetric snap is the violent one
 
 
+@pytest.mark.slow  # 44 s of compiling the FD pipeline; the converged study (slow) checks them too
 def test_gradients_match_central_differences(program):
     """d alpha_c^L / d beta and d m1 / d beta (implicit: extended system + equilibrium) vs
     central differences of the whole pipeline (bisection, refinement, landing); the refined
