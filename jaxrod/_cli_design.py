@@ -20,6 +20,17 @@ import os
 from ._cli import EXIT_NOT_CONVERGED, EXIT_OK, InputError
 
 
+def _save(design, path, rec):
+    """`--save PATH`: write PATH.eqx and PATH.json, record them in `rec` (InputError if not writable)."""
+    if not path:
+        return
+    try:
+        design.save(path)
+    except OSError as e:
+        raise InputError(f"save: cannot write {path!r}: {e.strerror or e}") from None
+    rec["saved"] = [path + ".eqx", path + ".json"]
+
+
 def _bounds(text):
     """'psi0=30:120,gap=0.3:0.95,s0=0.01:0.05' -> {'psi0_deg': (30, 120), ...}."""
     out = {}
@@ -90,12 +101,7 @@ def _cmd_design_speed(args):
            "status": b.status, "num_iterations": int(b.num_iterations), "n": n,
            "check": chk.to_dict(), "message": res.message, "num_starts": len(res.runs),
            "wall_time_s": res.wall_time}
-    if args.save:
-        try:
-            b.save(args.save)
-        except OSError as e:
-            raise InputError(f"save: cannot write {args.save!r}: {e.strerror or e}") from None
-        rec["saved"] = [args.save + ".eqx", args.save + ".json"]
+    _save(b, args.save, rec)
     if args.json:
         print(json.dumps(rec))
     else:
@@ -155,12 +161,7 @@ def _cmd_design(args):
     b = res.best
     rec = b.to_dict()
     rec.update({"num_starts": res.num_starts, "num_reached": res.num_reached, "wall_time_s": res.wall_time})
-    if args.save:
-        try:
-            b.save(args.save)
-        except OSError as e:
-            raise InputError(f"save: cannot write {args.save!r}: {e.strerror or e}") from None
-        rec["saved"] = [args.save + ".eqx", args.save + ".json"]
+    _save(b, args.save, rec)
     if args.json:
         print(json.dumps(rec))
     else:
