@@ -221,17 +221,38 @@ class Context:
         return self._eq[key]
 
 
-def evaluate_terms(terms, psi0, gap, s0, n):
+NUMBERS = ("target", "tol", "weight")
+
+
+def term_key(t):
+    """A term's structure without its numbers: its class and every field but `target`,
+    `tol` and `weight` (two terms with equal keys trace to the same program)."""
+    import dataclasses
+
+    return (type(t),) + tuple((f.name, getattr(t, f.name)) for f in dataclasses.fields(t) if f.name not in NUMBERS)
+
+
+def term_numbers(terms):
+    """(k, 3) array of each term's (target, tol, weight)."""
+    return jnp.asarray([[float(t.target), float(t.tol), float(t.weight)] for t in terms])
+
+
+def evaluate_terms(terms, psi0, gap, s0, n, numbers=None):
     """(residuals, values) of `terms` at one design. Constraint terms have no residual; a
-    violated constraint makes every residual NaN (infeasible design)."""
+    violated constraint makes every residual NaN (infeasible design). `numbers`: the
+    terms' (target, tol, weight) as a (k, 3) array (default `term_numbers(terms)`); the
+    traced code reads them only from there, so problems that differ only in their targets
+    share one compiled program."""
     ctx = Context(psi0, gap, s0, n)
+    numbers = term_numbers(terms) if numbers is None else numbers
     values = jnp.stack([t.value(ctx) for t in terms])
-    res = [math.sqrt(t.weight) * (v - t.target) / t.tol for t, v in zip(terms, values) if not t.is_constraint]
+    res = [jnp.sqrt(numbers[i, 2]) * (values[i] - numbers[i, 0]) / numbers[i, 1]
+           for i, t in enumerate(terms) if not t.is_constraint]
     res = jnp.stack(res) if res else jnp.zeros((0,), values.dtype)
     ok = jnp.ones((), bool)
-    for t, v in zip(terms, values):
+    for i, t in enumerate(terms):
         if t.is_constraint:
-            ok = ok & (v == t.target)
+            ok = ok & (values[i] == numbers[i, 0])
     res = jnp.where(ok, res, jnp.nan)
     return res, values
 

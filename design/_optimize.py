@@ -29,22 +29,50 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._objectives import evaluate_terms
+from ._objectives import evaluate_terms, term_key, term_numbers
 from ._params import NAMES, Parametrization
 
 STATUS = ("running", "reached", "stationary", "no_descent", "max_iter", "infeasible_start")
 
 
-class Problem(eqx.Module):
-    """Terms (a tuple of objective terms), a parametrization and the mesh size `n`."""
+class _Terms:
+    """The terms of a problem, compared and hashed by structure only (`term_key`): the
+    static part of a `Problem`, so that problems differing only in targets, tolerances or
+    weights (which `Problem.numbers` carries as an array) share one compiled program."""
 
-    terms: tuple = eqx.field(static=True)
+    def __init__(self, terms):
+        self.terms = tuple(terms)
+        self._key = tuple(term_key(t) for t in self.terms)
+
+    def __eq__(self, other):
+        return isinstance(other, _Terms) and self._key == other._key
+
+    def __hash__(self):
+        return hash(self._key)
+
+
+class Problem(eqx.Module):
+    """Terms (a tuple of objective terms), a parametrization and the mesh size `n`.
+    `numbers`: the terms' (target, tol, weight), a traced array (see `_Terms`)."""
+
+    structure: _Terms = eqx.field(static=True)
+    numbers: jax.Array
     param: Parametrization = eqx.field(static=True)
     n: int = eqx.field(static=True, default=40)
 
+    def __init__(self, terms, param, n=40):
+        self.structure = _Terms(terms)
+        self.numbers = term_numbers(self.structure.terms)
+        self.param = param
+        self.n = n
+
+    @property
+    def terms(self):
+        return self.structure.terms
+
     def residuals(self, z):
         psi0, gap, s0 = self.param.to_design(z)
-        return evaluate_terms(self.terms, psi0, gap, s0, self.n)
+        return evaluate_terms(self.terms, psi0, gap, s0, self.n, self.numbers)
 
     def linearize(self, z):
         """(r, J, values) at z."""

@@ -82,3 +82,33 @@ def count_compiles():
 def loglog_slope(x, y):
     """Least-squares slope of log|y| against log x."""
     return float(np.polyfit(np.log(np.asarray(x, float)), np.log(np.abs(np.asarray(y, float))), 1)[0])
+
+
+def run_notebook(name, timeout=600):
+    """Execute notebooks/NAME in quick mode (JAXROD_QUICK=1) with nbclient; returns the
+    executed notebook. Checks it was committed without outputs."""
+    import os
+    from pathlib import Path
+
+    import nbclient
+    import nbformat
+
+    nb_dir = Path(__file__).resolve().parent.parent / "notebooks"
+    nb = nbformat.read(nb_dir / name, as_version=4)
+    assert all(c.get("outputs", []) == [] for c in nb.cells if c.cell_type == "code"), "commit without outputs"
+    old = os.environ.get("JAXROD_QUICK")
+    os.environ["JAXROD_QUICK"] = "1"
+    try:
+        nbclient.NotebookClient(nb, timeout=timeout, kernel_name="python3",
+                                resources={"metadata": {"path": str(nb_dir)}}).execute()
+    finally:
+        if old is None:
+            os.environ.pop("JAXROD_QUICK", None)
+        else:
+            os.environ["JAXROD_QUICK"] = old
+    return nb
+
+
+def notebook_text(nb):
+    """Concatenated stream outputs of the code cells."""
+    return "\n".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))

@@ -13,7 +13,7 @@ import pytest
 
 import design as ds
 import jaxrod as jr
-from helpers import central_difference
+from helpers import central_difference, count_compiles
 
 
 # --- parametrization ------------------------------------------------------------------
@@ -192,3 +192,22 @@ def test_critical_angle_gradient_agrees_with_snap_angles_own_derivative():
     if float(jnp.max(jnp.abs(theirs))) == 0.0:
         pytest.skip("this jaxrod's snap_angles is not differentiable")
     np.testing.assert_allclose(np.asarray(mine), np.asarray(theirs), atol=1e-7 * float(jnp.max(jnp.abs(mine))))
+
+
+def test_problems_differing_only_in_targets_share_one_program(problem):
+    """Targets, tolerances and weights are data (`Problem.numbers`), not part of the compiled
+    program: a problem with other numbers but the same terms reuses the compiled call and
+    still gets its own residuals r = sqrt(w) (v - target) / tol."""
+    from design._optimize import _linearize_batch
+
+    z = PARAM.from_values(psi0_deg=70.0, gap=0.5)[None]
+    r1, _, v1 = _linearize_batch(problem, z)
+    other = ds.Problem((ds.FoldHeight(-0.3, state="down", tol=1e-3, weight=4.0),
+                        ds.BendingEnergy(10.0, state="down", tol=0.5)), PARAM, N)
+    with count_compiles() as c:
+        r2, _, v2 = _linearize_batch(other, z)
+    assert c[0] == 0
+    np.testing.assert_array_equal(np.asarray(v1), np.asarray(v2))
+    v = np.asarray(v2)[0]
+    np.testing.assert_allclose(np.asarray(r2)[0], [2.0 * (v[0] + 0.3) / 1e-3, (v[1] - 10.0) / 0.5], rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(r1)[0], [(v[0] + 0.22) / 1e-4, (v[1] - 40.0) / 1e-2], rtol=1e-12)

@@ -78,6 +78,8 @@ def test_cli_default_is_extrapolated(capsys):
     assert 0 < rec["alpha_c_up_deg"] < -rec["alpha_c_down_deg"]
 
 
+@pytest.mark.slow  # 77 s on 2 cores (three reverse-mode compiles); the implicit gradients themselves are
+# checked against central differences in CI by test_critical.py and test_gradients.py
 def test_extrapolated_gradient_is_the_same_combination():
     """d alpha_R / d Psi0 = (4 d a_2N - d a_N) / 3 (a fixed linear combination of the
     implicit derivatives of the two meshes)."""

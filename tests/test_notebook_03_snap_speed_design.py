@@ -1,0 +1,16 @@
+"""Notebook 03_snap_speed_design.ipynb runs top to bottom in quick mode (JAXROD_QUICK=1, see
+notebooks/README.md) and prints what it must. One file per notebook, so that the xdist
+workers share them out (tests/conftest.py schedules the slowest first)."""
+
+import pytest
+
+pytest.importorskip("nbclient")
+pytest.importorskip("nbformat")
+
+from helpers import notebook_text, run_notebook  # noqa: E402
+
+
+def test_notebook_03_snap_speed_design():
+    out = notebook_text(run_notebook("03_snap_speed_design.ipynb"))
+    assert "quick mode" in out and "target reached" in out and "target not reached" in out
+    assert "fastest snap found" in out

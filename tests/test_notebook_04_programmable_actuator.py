@@ -1,0 +1,16 @@
+"""Notebook 04_programmable_actuator.ipynb runs top to bottom in quick mode (JAXROD_QUICK=1, see
+notebooks/README.md) and prints what it must. One file per notebook, so that the xdist
+workers share them out (tests/conftest.py schedules the slowest first)."""
+
+import pytest
+
+pytest.importorskip("nbclient")
+pytest.importorskip("nbformat")
+
+from helpers import notebook_text, run_notebook  # noqa: E402
+
+
+def test_notebook_04_programmable_actuator():
+    out = notebook_text(run_notebook("04_programmable_actuator.ipynb"))
+    assert "quick mode" in out and "outcome: reached" in out and "not reached: N = 24 step 1" in out
+    assert "FAILED" not in out
