@@ -6,8 +6,8 @@ CI versions run at N = 16 with the check at N = 24 (snap_speed at N = 16 is 2 % 
 converged v_s at Psi0 = 90 deg; N = 16 -> 24 moves it by 0.4 %); the design-mesh versions
 (N = 48, check at N = 96) are marked slow. Every study compiles its own problem (40-50 s of
 CPU each: snap_angles, the critical point's implicit derivative, the run and its reverse
-pass), which is nearly all of this file's time; the CI gradient check reuses study (b)'s
-compiled problem, the CLI test study (c)'s."""
+pass), which is nearly all of this file's time; the CLI test reuses study (c)'s compiled
+problem. The CI check of the v_s gradient against central differences is notebook 03's."""
 
 import json
 import math
@@ -73,6 +73,8 @@ def _study_b_problem(n):
     return ds.Problem((ds.SnapSpeed(100.0, tol=1.0),), param, n)
 
 
+@pytest.mark.slow  # 77 s on 2 cores; in CI, notebook 03's gradient cell is checked against central
+# differences at the same N and steps (tests/test_notebook_03_snap_speed_design.py)
 def test_snap_speed_gradient_in_the_design_loop_matches_central_differences():
     """The Jacobian the design loop uses (jacfwd through snap_speed's custom JVP, in the
     unconstrained z of the parametrization, the compiled function of study (b)) vs central
