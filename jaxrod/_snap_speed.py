@@ -223,7 +223,8 @@ def snap_speed(scene, direction="up", *, nudge=0.03, past=1e-3, dt=None, t1=2.0,
     opts = _options(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift)
     if any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(scene)):
         # already inside a transformation (the caller's jit / jacfwd compiles it): no nested
-        # jit, whose primal would be traced once more (~9 s at N = 16) before its JVP rule
+        # jit of its own (measured: tracing jit(jacfwd(snap_speed)) at N = 16 took 17.4 s
+        # instead of 19.6 s)
         return _speed(scene, opts=opts)
     return _speed_jit(scene, opts)
 
