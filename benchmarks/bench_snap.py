@@ -16,7 +16,7 @@ the hysteresis loop (snap up from the down state, snap down from the up state).
   |alpha_N - alpha_{N/2}| / 3 of the discretization error is below 0.002 deg; alpha_c
   converges as N^-2; N/2 is run too, for that estimate).
 * phase diagram -- Psi0 = 30, 60, 90, 120, 180 deg x G/L = 0.1:0.02:0.9 (41 gaps),
-  `jr.phase_diagram` (one jitted `lax.map` of snap_angles over the gaps per Psi0) at
+  `jr.phase_diagram` (one jitted `lax.scan` over the gaps per Psi0, warm-started) at
   N = 100: run time after a first (compiling) call.
 * naive -- alpha in 0.1 deg steps from alpha = 0; at each step `jr.solve_equilibrium`
   (plain Newton from the previous solution) and dense `eigvalsh` of
@@ -348,7 +348,7 @@ def write_md(res, path):
     ph = res.get("phase")
     if ph:
         L += ["", f"Phase diagram: {len(ph['psi0_deg'])} Psi0 x {len(ph['gaps'])} gaps at N = {ph['N']}, `jr.phase_diagram` "
-              f"(a jitted `lax.map` of `snap_angles` over the gaps per Psi0): **{ph['run_s']:.2f} s** "
+              f"(one jitted `lax.scan` over the gaps per Psi0, start states warm-started from the previous gap, bisection without the extended-system polish): **{ph['run_s']:.2f} s** "
               f"run ({ph['per_scene_ms']:.0f} ms per scene), compile {ph['compile_s']:.1f} s; target 5 s: "
               f"**{'PASS' if ph['run_s'] <= 5.0 else 'FAIL'}**."]
     ex = res.get("extrapolated")

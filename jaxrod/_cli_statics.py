@@ -157,7 +157,7 @@ def register(sub):
 
     q = sub.add_parser("phase-diagram", help="alpha_c up/down over a grid of Psi0 and G/L (NetCDF + PNG)",
                        description="Critical clamp angles of both snapping paths over Psi0 x G/L, one\n"
-                                   "vmapped call per Psi0. Writes DIR/phase_diagram.nc (xarray, NetCDF3) and\n"
+                                   "compiled call per Psi0 (gaps in order, warm-started). Writes DIR/phase_diagram.nc (xarray, NetCDF3) and\n"
                                    "DIR/phase_diagram.png; an interrupted run resumes from DIR/chunks/.",
                        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     q.add_argument("--psi0", default="30,60,90,120,180", metavar="LIST",

@@ -2,16 +2,26 @@ r"""Phase diagram of the snap angles (paper Fig. 2c): $\alpha_{c,\rm up}$ and
 $\alpha_{c,\rm down}$ of [`jaxrod.snap_angles`][] over a grid of fold angles $\Psi_0$ and
 gaps $G/L$ (symmetric actuation, $\alpha_L=\alpha_R=\alpha$, conventions of MODEL.md).
 
-One chunk per $\Psi_0$: a single jitted call that maps `snap_angles` over the gaps with
-`lax.map` (one gap after the other inside the compiled call). $\Psi_0$ and the gaps are
-traced, so every chunk reuses one compilation (per mesh and grid length). Each gap keeps
-its own result code: a gap where a state does not exist gives NaN angles there and does
-not affect the others.
+One chunk per $\Psi_0$: a single jitted call that runs through the gaps in order
+(`lax.scan`). The start states of each gap (up and down at $\alpha=0$) come from Newton
+started at the previous gap's states, accepted when the result is the same state
+(converged, stable, fold height of the same sign, no angle changed by $\pi/2$ or more);
+otherwise (the first gap, a state that stops existing) from the homotopy of
+[`jaxrod.initial_state`][], as `snap_angles` builds them. `warm_starts` (0, 1 or 2) records
+which. Then `snap_angles` runs from those states without its extended-system polish:
+$\alpha_c$ is the bisection value, within ~1e-8 rad of the polished one. Homotopy (51 ms
+of 93 ms per scene at N = 100) and polish (31 ms) were the cost; on the 5 x 41 grid at
+N = 100 this takes ~3 s instead of ~16 s, with the same kinds, start codes and landing
+states at all 205 points and $|\Delta\alpha_c|\le6\times10^{-7}$ deg (measured against
+single polished `snap_angles` calls; `tests/test_phase_diagram.py` checks a small grid).
+$\Psi_0$ and the gaps are traced, so every chunk reuses one compilation (per mesh and grid
+length). Each gap keeps its own result code: a gap where a state does not exist gives
+NaN angles there and does not affect the others.
 
 Why not `vmap`: batched, the loops of every member run as long as the slowest one, and on
 XLA:CPU the batched LAPACK kernels inside them (jaxlib's `ParallelBatchMap` for the
 tridiagonal and dense solves) deadlocked on a 2-core machine (every thread waiting; seen
-with 9 and 41 gaps, not with 3). Sequentially the 5 x 41 grid takes ~15 s at N = 100.
+with 9 and 41 gaps, not with 3). The warm starts also need the gaps in order.
 
 With `out`, each finished chunk is written to `out/chunks/psi0_<deg>.nc` (NetCDF3 via
 scipy) and the run is resumable: a chunk whose file exists with the same grid, $s_0$
@@ -29,21 +39,63 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jax import lax
+
+from ._continuation import Continuation, SymmetricAlpha
+from ._energy.lagrangian import positions
+from ._equilibrium import _float_scene, solve_equilibrium
+from ._initial import _MAX_STEP_CHANGE, _initial_state
 from ._misc import check_param
 from ._rod import Clamps, Mesh, Scene, Strip
-from ._snap import snap_angles
+from ._snap import _snap_angles_from
+from ._solution import RESULTS
 
 VARIABLES = ("alpha_c_up", "alpha_c_down", "kind_up", "kind_down", "fold_height_before_up",
              "fold_height_after_up", "fold_height_before_down", "fold_height_after_down",
-             "start_up", "start_down")
+             "start_up", "start_down", "warm_starts")
+
+
+def _warm_or_homotopy(scene, sgn, t_prev, m_prev, ok_prev):
+    """The up (`sgn` = +1) or down (-1) state of `scene` at alpha = 0: Newton from the
+    neighbouring gap's state when that exists and the result is the same state (converged,
+    stable, fold height of the right sign, no angle changed by pi/2 or more), else the
+    homotopy of `jaxrod.initial_state` (a real branch: the chunk is not vmapped).
+    Returns the equilibrium and whether the warm start was used."""
+    is_sds = lambda x: isinstance(x, jax.ShapeDtypeStruct)  # noqa: E731
+    shapes = eqx.filter_eval_shape(_initial_state, scene, sgn)
+    static = eqx.filter(shapes, is_sds, inverse=True)
+    shapes = eqx.filter(shapes, is_sds)
+    arrays = lambda e: eqx.filter(e, eqx.is_array)  # noqa: E731
+    zeros = lambda: jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)  # noqa: E731
+
+    def warm():
+        eq = solve_equilibrium(scene, t_prev, m_prev)
+        fh = positions(eq.theta, eq.force, scene)[scene.mesh.n // 2, 1]
+        good = (eq.converged & eq.stable & (sgn * fh > 0)
+                & (jnp.max(jnp.abs(eq.theta - t_prev)) < _MAX_STEP_CHANGE))
+        return good, jax.tree.map(lambda x, s: jnp.asarray(x, s.dtype), arrays(eq), shapes)
+
+    good, eq_w = lax.cond(ok_prev, warm, lambda: (jnp.zeros((), bool), zeros()))
+    eq = lax.cond(good, lambda: eq_w, lambda: arrays(_initial_state(scene, sgn)))
+    return eqx.combine(eq, static), good
 
 
 @eqx.filter_jit
 def _chunk(psi0, gaps, s0, mesh):
-    """All gaps at one fold angle (rad): `snap_angles` mapped over the gaps (`lax.map`)."""
+    """All gaps at one fold angle (rad), one gap after the other (`lax.scan`): the start
+    states of each gap by Newton from the previous gap's (homotopy where that fails), then
+    `snap_angles` from them without the extended-system polish (bisection values)."""
+    par = SymmetricAlpha()
+    dtype = psi0.dtype
+    N = mesh.n
 
-    def one(g):
-        r = snap_angles(Scene(Strip(psi0=psi0, s0=s0), Clamps(g), mesh))
+    def one(carry, g):
+        t_prev, m_prev, ok_prev = carry
+        scene = par.set(_float_scene(Scene(Strip(psi0=psi0, s0=s0), Clamps(g), mesh)), 0.0)
+        eqs, warmed = zip(*[_warm_or_homotopy(scene, jnp.asarray(sgn, dtype), t_prev[i], m_prev[i], ok_prev[i])
+                            for i, sgn in enumerate((1.0, -1.0))])
+        starts = jax.tree.map(lambda a, b: jnp.stack([a, b]), *eqs)
+        r = _snap_angles_from(scene, starts, Continuation(), jnp.pi, 24, False)
         out = {}
         for name, p in (("up", r.up), ("down", r.down)):
             out[f"alpha_c_{name}"] = jnp.degrees(p.alpha_c)
@@ -51,9 +103,11 @@ def _chunk(psi0, gaps, s0, mesh):
             out[f"fold_height_before_{name}"] = p.fold_height_before
             out[f"fold_height_after_{name}"] = p.fold_height_after
             out[f"start_{name}"] = p.result._value.astype(jnp.int32)
-        return out
+        out["warm_starts"] = jnp.stack(warmed).astype(jnp.int32).sum()
+        return (starts.theta, starts.force, starts.result == RESULTS.successful), out
 
-    return jax.lax.map(one, gaps)
+    init = (jnp.zeros((2, N), dtype), jnp.zeros((2, 2), dtype), jnp.zeros((2,), bool))
+    return lax.scan(one, init, gaps)[1]
 
 
 def _attrs(gaps, s0, n, refine):
@@ -108,7 +162,8 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     **Returns:** dataset with dims `(psi0, gap)`: `alpha_c_up`, `alpha_c_down` (degrees,
     NaN where the path does not snap), `kind_up`/`kind_down` (0 none, 1 fold, 2 branch
     point), fold heights before/after each snap, `start_up`/`start_down` (RESULTS codes of
-    the start states); attribute `computed_chunks` lists the $\Psi_0$ computed by this call
+    the start states), `warm_starts` (how many of the two start states came from the
+    previous gap, see the module docstring); attribute `computed_chunks` lists the $\Psi_0$ computed by this call
     (the others were read back from `out`). Needs float64.
     """
     import xarray as xr

@@ -172,8 +172,16 @@ def _path(scene, start_eq, direction, parameter, settings, bound, bisections, to
     state, up to `stages` times."""
     def body(c, _):
         t0, m0, lam0, ok, done, out = c
-        br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = _stage(
-            scene, parameter, t0, m0, lam0, ok & ~done, direction, settings, bound, bisections, tol)
+        def run(args):
+            t0, m0, lam0, ok0 = args
+            return _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bisections, tol)
+
+        # a path that has already snapped skips its later stages (a real branch outside vmap;
+        # under vmap both sides run, as before)
+        args = (t0, m0, lam0, ok & ~done)
+        shapes = jax.eval_shape(run, args)
+        skip = lambda _: jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)  # noqa: E731
+        br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = lax.cond(done, skip, run, args)
         w = discretize(scene).h
         dist = jnp.sqrt(jnp.sum(w * (ta - t) ** 2))
         jumped = snaps & (dist > JUMP_DISTANCE) & landed
@@ -219,13 +227,18 @@ class SnapAngles(eqx.Module):
 
 @eqx.filter_jit
 def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float = jnp.pi,
-                bisections: int = 24) -> SnapAngles:
+                bisections: int = 24, polish: bool = True) -> SnapAngles:
     r"""Critical clamp angles $\alpha_{c,\rm up}>0$ and $\alpha_{c,\rm down}<0$ of a scene
     under symmetric clamp rotation, their kinds, the states just before and after.
 
     The clamp angles of `scene` are ignored (the loop starts at $\alpha=0$). A path that
     reaches $|\alpha|=$`bound` without losing stability does not snap (`snaps=False`,
     `alpha_c=NaN`, kind "none").
+
+    `polish=False` skips the extended-system Newton refinement (`jaxrod.critical_point`):
+    $\alpha_c$ is then the bisection value, within ~1e-8 rad of the polished one at
+    `bisections=24`, and carries no gradient (`refine_result` and `mode` are `None`).
+    Used by [`jaxrod.phase_diagram`][], where the refinement was a third of the cost.
 
     The angles are those of the scene's mesh: second-order accurate, off by up to 0.17 deg
     at N = 100 ($s_0=0.02$). For the continuum value use
@@ -234,13 +247,22 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     parameter = SymmetricAlpha()
     scene_d = parameter.set(_float_scene(scene), 0.0)  # carries gradients to the refinement
     scene = lax.stop_gradient(scene_d)
-    dtype = jnp.result_type(scene.strip.psi0)
-    require_float64(dtype, "snap_angles")
-    tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
+    require_float64(jnp.result_type(scene.strip.psi0), "snap_angles")
     # both start states through one traced body (index 0 up, 1 down), one after the other:
     # `lax.map`, not `vmap`, which would batch the LAPACK kernels inside the Newton loops
     # (see `_phase.py` for the XLA:CPU deadlock that batching caused)
-    starts = lax.map(lambda sg: _initial_state(scene, sg), jnp.array([1.0, -1.0], dtype))
+    starts = lax.map(lambda sg: _initial_state(scene, sg), jnp.array([1.0, -1.0], scene.strip.psi0.dtype))
+    return _snap_angles_from(scene_d, starts, settings, bound, bisections, polish)
+
+
+def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish):
+    """`snap_angles` from given start states (`starts`: the up and down equilibria of the
+    scene at alpha = 0 stacked on a leading axis, as `lax.map` of `_initial_state` makes
+    them; a member whose `result` is not successful does not exist)."""
+    parameter = SymmetricAlpha()
+    scene = lax.stop_gradient(scene_d)
+    dtype = jnp.result_type(scene.strip.psi0)
+    tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
     pick = lambda tree, i: jax.tree.map(lambda x: x[i], tree)  # noqa: E731
     up_eq, down_eq = pick(starts, 0), pick(starts, 1)
     arrays = lambda e: eqx.filter(e, eqx.is_array)  # noqa: E731
@@ -270,7 +292,7 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
         last = br.count - 1
         nxt = (br.lam[last], br.theta[last], br.force[last], path.snaps, path.alpha_c, path.theta_after,
                path.force_after)
-        return nxt, _polish(scene_d, path, parameter)
+        return nxt, (_polish(scene_d, path, parameter) if polish else path)
 
     N = scene.mesh.n
     z = jnp.zeros((), dtype)

@@ -121,17 +121,32 @@ def test_cli_json(tmp_path, monkeypatch, capsys):
     assert json.loads(capsys.readouterr().out)["computed_chunks"] == []
 
 
-@pytest.mark.slow
-def test_vmapped_chunk_equals_single_calls(tmp_path):
-    """The real computation: one vmapped call per Psi0 equals single `snap_angles` calls,
-    and one bad member (a gap where the down state does not exist) does not poison the batch."""
-    gaps = [0.3, 0.5, 0.8]
-    ds = jr.phase_diagram([30.0, 60.0], gaps, out=str(tmp_path), progress=False)
+def test_warm_started_chunk_equals_single_calls(tmp_path):
+    """The real computation: the warm-started chunk (start states by Newton from the
+    previous gap, `snap_angles` without the extended-system polish) gives the same kinds,
+    start codes and landing states as single polished `snap_angles` calls, and alpha_c to
+    1e-6 deg; a gap where the down state does not exist (30 deg, 0.8) falls back to the
+    homotopy and does not poison the gaps after it."""
+    gaps = [0.3, 0.5, 0.8, 0.82]
+    n = 40
+    ds = jr.phase_diagram([30.0, 60.0], gaps, n=n, out=str(tmp_path), progress=False)
+    f = jax.jit(jr.snap_angles)
     for p in (30.0, 60.0):
         for g in gaps:
-            r = jr.snap_angles(jr.make_scene(p, g, 0.0))
+            r = f(jr.make_scene(p, g, 0.0, n=n))
             for name, path in (("up", r.up), ("down", r.down)):
-                a = float(ds[f"alpha_c_{name}"].sel(psi0=p, gap=g))
-                b = float(np.degrees(path.alpha_c))
-                assert (np.isnan(a) and np.isnan(b)) or abs(a - b) < 1e-8, (p, g, name, a, b)
-                assert int(ds[f"kind_{name}"].sel(psi0=p, gap=g)) == int(path.kind)
+                at = lambda k: float(ds[f"{k}_{name}"].sel(psi0=p, gap=g))  # noqa: E731
+                a, b = at("alpha_c"), float(np.degrees(path.alpha_c))
+                assert (np.isnan(a) and np.isnan(b)) or abs(a - b) < 1e-6, (p, g, name, a, b)
+                assert int(at("kind")) == int(path.kind), (p, g, name)
+                assert int(at("start")) == int(path.result._value), (p, g, name)
+                fa, fb = at("fold_height_after"), float(path.fold_height_after)
+                assert (np.isnan(fa) and np.isnan(fb)) or abs(fa - fb) < 1e-6, (p, g, name, fa, fb)
+    warm = ds["warm_starts"]
+    assert int(warm.sel(psi0=60.0, gap=0.3)) == 0  # first gap: homotopy
+    assert int(warm.sel(psi0=60.0, gap=0.5)) == 2  # both states from the previous gap
+    # 30 deg, 0.8 and 0.82: no down state at alpha = 0 (the Newton from 0.5's down state is
+    # rejected, the homotopy reports state_not_found); only the up state is warm-started
+    down = jr.initial_state(jr.make_scene(30.0, 0.8, 0.0, n=n), "down")
+    assert down.result == jr.RESULTS.state_not_found
+    assert int(warm.sel(psi0=30.0, gap=0.8)) == 1 and int(warm.sel(psi0=30.0, gap=0.82)) == 1
