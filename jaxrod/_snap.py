@@ -28,7 +28,6 @@ from jaxtyping import Array
 
 from . import _kkt
 from ._continuation import (
-    AbstractParameter,
     Continuation,
     SymmetricAlpha,
     _pieces,
