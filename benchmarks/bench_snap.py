@@ -510,7 +510,7 @@ def main(argv=None):
     for t in res["targets"]:
         t.pop("pass_", None)
     res["notes"] += [
-        "jaxrod times are the compiled `jax.jit(jr.snap_angles)` executable (both paths, 48 bisections each, "
+        "jaxrod times are the compiled `jax.jit(jr.snap_angles)` executable (both paths, 24 bisections each plus the extended-system polish, "
         "landing states included); the first call additionally compiles (column compile).",
         "AUTO-07p times are the wall time of two runs of the compiled equation executable (process start and "
         "file I/O included, gfortran build excluded), `OMP_NUM_THREADS=1`, equations scaled by h_i "
