@@ -99,17 +99,25 @@ def main():
         rec["refinement"] = refinement_timing()
         path.write_text(json.dumps(rec, indent=1))
     lines = ["# Termination gap G*(Psi0), n = 100, s0 = 0.02 L", "",
-             "| Psi0 (deg) | G*_up | ends by | G*_down | ends by | cusp G_c (down) | dG_c/dPsi0 (1/rad) | snap_angles calls | wall (s) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| Psi0 (deg) | G*_up | ends by | start-state fold G_f (up) | dG_f/dPsi0 (1/rad) | G*_down | ends by "
+             "| cusp G_c (down) | dG_c/dPsi0 (1/rad) | snap_angles calls | wall (s) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
 
     def fmt(x, f="{:.5f}"):
         return "-" if x is None else f.format(x)
 
     for key, row in rec["rows"].items():
-        lines.append(f"| {key} | {fmt(row['gap_up'])} | {row['reason_up']} | {fmt(row['gap_down'])} | "
+        lines.append(f"| {key} | {fmt(row['gap_up'])} | {row['reason_up']} | {fmt(row.get('state_fold_gap_up'), '{:.6f}')} | "
+                     f"{fmt(row.get('dstate_fold_gap_dpsi0_up'), '{:.4f}')} | {fmt(row['gap_down'])} | "
                      f"{row['reason_down']} | {fmt(row['cusp_gap_down'])} | {fmt(row['dcusp_gap_dpsi0_down'], '{:.4f}')} | "
                      f"{row['evaluations']} | {row['wall_s']:.1f} |")
     ref = rec["refinement"]
+    lines += ["", "G*_up (bisection midpoint, bracket 1e-5) ends where the snap-up path's start, the down state at "
+              "alpha = 0, stops existing; G_f is that end solved exactly (the extended system of `critical_point` "
+              "with the gap as parameter, a fold in G at every Psi0 here, inside the bracket each time) and "
+              "dG_f/dPsi0 its implicit derivative (tests/test_termination.py checks it against central "
+              "differences). G_c is the cusp where the snap-down path's fold pair meets (G_c > G*_down: just "
+              "below G_c the jump is too small to count as a snap)."]
     lines += ["", "Side by side at Psi0 = 60 deg, G/L = 0.5 (steady, median of 5):", "",
               "| snap_angles (s) | extended-system refinement, both paths (s) | ratio |", "|---|---|---|",
               f"| {ref['snap_angles_s']:.3f} | {ref['refinement_both_paths_s']:.3f} | {ref['ratio']:.3f} |", "",

@@ -48,7 +48,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array
 
-from ._continuation import AbstractParameter, SymmetricAlpha
+from ._continuation import AbstractParameter, Gap, SymmetricAlpha
 from ._energy.geometry import discretize
 from ._energy.lagrangian import lagrangian, positions
 from ._solution import RESULTS
@@ -185,7 +185,8 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
     point (e.g. the bisection result of [`jaxrod.snap_angles`][]); `mode`: the angle part
     of the critical mode there (e.g. `jaxrod._kkt.modes` of the lowest eigenvalue);
     `kind`: 1 fold (full Moore-Spence system), 2 symmetry-breaking branch point
-    (symmetric state, asymmetric mode; `parameter` must be `SymmetricAlpha`). `kind` may
+    (symmetric state, asymmetric mode; `parameter` must be `SymmetricAlpha`, or `Gap` for a
+    scene with mirror-symmetric clamps, $\alpha_L=\alpha_R$). `kind` may
     be traced (both systems are then solved and one selected). `tol`: Newton stops when
     the $\alpha$ update is below `tol` (rad).
 
@@ -208,7 +209,10 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
     kind = jnp.asarray(kind)
 
     outs = []
-    outs_kinds = (KIND_FOLD, KIND_BRANCH_POINT) if isinstance(parameter, SymmetricAlpha) else (KIND_FOLD,)
+    # the branch-point system needs a mirror-symmetric problem: symmetric actuation, or the
+    # gap of a scene whose clamps are symmetric (alpha_L = alpha_R, e.g. both 0)
+    symmetric = isinstance(parameter, (SymmetricAlpha, Gap))
+    outs_kinds = (KIND_FOLD, KIND_BRANCH_POINT) if symmetric else (KIND_FOLD,)
     for which in outs_kinds:
         if which == KIND_FOLD:
             def res(z, sc):

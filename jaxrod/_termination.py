@@ -38,8 +38,15 @@ criterion: [`jaxrod.cusp_point`][] solves the fold system augmented by the gap a
 vanishing cubic coefficient $\tilde{\mathcal L}^{(3)}[v,v,v]=0$, from the fold at $G^\ast_-$,
 giving the cusp gap $G_c\ (\ge G^\ast)$ and $dG_c/d\Psi_0$ by implicit differentiation
 (`cusp_gap_*`, `dcusp_gap_dpsi0_*`). Between $G^\ast$ and $G_c$ the fold pair still exists
-but its jump is below the snap criterion. The bisection gap $G^\ast$ ends a discrete search
-and has no derivative.
+but its jump is below the snap criterion. For a path whose start state is lost, the end
+is likewise located exactly: the start state (up or down at $\alpha=0$) ends at a fold in
+$G$ or turns unstable at a symmetry-breaking branch point in $G$; both extended systems of
+[`jaxrod.critical_point`][] are solved with the gap as their parameter (at $\alpha=0$), from
+the state at $G^\ast_-$ and its lowest symmetric / asymmetric mode, and the one inside the
+bracket is kept (`state_end_kind_*`): `state_fold_gap_*` $=G_f$ and
+`dstate_fold_gap_dpsi0_*` $=dG_f/d\Psi_0$ by implicit differentiation. There
+$G^\ast=G_f$ exactly (the path snaps up to where its start exists). The bisection gap
+$G^\ast$ itself ends a discrete search and has no derivative.
 """
 
 from __future__ import annotations
@@ -50,6 +57,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax import lax
 import numpy as np
 
 from ._misc import check_param
@@ -69,7 +77,11 @@ class TerminationGap(NamedTuple):
     $G^\ast_-$), `jump_up`/`jump_down` (fold-height change of the snap at $G^\ast_-$),
     `evaluations` (number of `snap_angles` calls); for a path that ends at a cusp,
     `cusp_gap_*` the exact cusp of the fold pair ([`jaxrod.cusp_point`][], $G_c\ge G^\ast$) and
-    `dcusp_gap_dpsi0_*` $dG_c/d\Psi_0$ (per radian, implicit differentiation); NaN otherwise."""
+    `dcusp_gap_dpsi0_*` $dG_c/d\Psi_0$ (per radian, implicit differentiation); for a path
+    whose start state is lost, `state_fold_gap_*` the exact gap $G_f$ where that state (at
+    $\alpha=0$) ends, `state_end_kind_*` how ("fold" in $G$, or "branch_point": it turns
+    unstable through an asymmetric mode; "none" if not located), and
+    `dstate_fold_gap_dpsi0_*` $dG_f/d\Psi_0$; NaN otherwise."""
 
     psi0_deg: float
     gap_up: float
@@ -89,6 +101,12 @@ class TerminationGap(NamedTuple):
     cusp_gap_down: float = math.nan
     dcusp_gap_dpsi0_up: float = math.nan
     dcusp_gap_dpsi0_down: float = math.nan
+    state_fold_gap_up: float = math.nan
+    state_fold_gap_down: float = math.nan
+    dstate_fold_gap_dpsi0_up: float = math.nan
+    dstate_fold_gap_dpsi0_down: float = math.nan
+    state_end_kind_up: str = "none"
+    state_end_kind_down: str = "none"
 
     def to_dict(self):
         def clean(x):
@@ -200,13 +218,18 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
                              alpha=float(p["alpha"]), jump=jump)
         if reason == "cusp":
             results[name].update(_cusp(base, psi, lo, p))
+        elif reason == "start_state_lost":
+            results[name].update(_start_fold(base, psi, lo, hi, "down" if name == "up" else "up"))
     if bar is not None:
         bar.close()
     u, d = results["up"], results["down"]
     nan = math.nan
     return TerminationGap(float(psi0_deg), u["gap"], d["gap"], u["bracket"], d["bracket"], u["reason"], d["reason"],
                           u["kind"], d["kind"], u["alpha"], d["alpha"], u["jump"], d["jump"], count[0],
-                          u.get("cusp", nan), d.get("cusp", nan), u.get("dcusp", nan), d.get("dcusp", nan))
+                          u.get("cusp", nan), d.get("cusp", nan), u.get("dcusp", nan), d.get("dcusp", nan),
+                          u.get("state_fold", nan), d.get("state_fold", nan),
+                          u.get("dstate_fold", nan), d.get("dstate_fold", nan),
+                          u.get("state_end_kind", "none"), d.get("state_end_kind", "none"))
 
 
 @eqx.filter_jit
@@ -229,3 +252,52 @@ def _cusp(base, psi, gap, p):
     if not bool(ok) or not gap - 1e-6 <= float(gc) < 1.0:
         return {}
     return dict(cusp=float(gc), dcusp=float(dg))
+
+
+@eqx.filter_jit
+def _state_fold_gap(base, psi0, gap, sgn):
+    """Where the up (`sgn` +1) or down (-1) state at alpha = 0 ends as the gap grows: a fold
+    in G (Moore-Spence system of `jaxrod.critical_point`, the gap as its parameter, from the
+    state's lowest mirror-symmetric mode) or a symmetry-breaking branch point in G (the
+    reduced system, from its lowest asymmetric mode), both from the state at `gap`, with
+    jvp in Psi0 (implicit differentiation). Returns (gaps, ok, dgaps/dPsi0) for (fold, branch
+    point)."""
+    from . import _kkt
+    from ._continuation import Gap
+    from ._critical import critical_point
+    from ._initial import _initial_state
+    from ._stability import mode_parity
+
+    sc0 = eqx.tree_at(lambda s: (s.strip.psi0, s.clamps.gap), base, (psi0, gap))
+    eq = _initial_state(lax.stop_gradient(sc0), sgn)
+    K = _kkt.structured(eq.theta, eq.force, lax.stop_gradient(sc0))
+    v = _kkt.modes(K, _kkt.smallest_eigenvalues(K, 4))
+    par = mode_parity(v)
+    v_sym = v[:, jnp.argmax(par > 0)]  # the lowest symmetric and the lowest asymmetric mode
+    v_asym = v[:, jnp.argmax(par < 0)]
+
+    def g(p):
+        sc = eqx.tree_at(lambda s: s.strip.psi0, sc0, p)
+        out, ok = [], []
+        for mode, kind in ((v_sym, 1), (v_asym, 2)):
+            cp = critical_point(sc, eq.theta, eq.force, gap, mode, kind, parameter=Gap())
+            out.append(cp.alpha)
+            ok.append((cp.result == RESULTS.successful) & (eq.result == RESULTS.successful))
+        return jnp.stack(out), jnp.stack(ok)
+
+    gf, dg, ok = jax.jvp(g, (psi0,), (jnp.ones_like(psi0),), has_aux=True)
+    return gf, ok, dg
+
+
+def _start_fold(base, psi, lo, hi, state):
+    """Where the path's start state (`state` at alpha = 0) stops existing (as a stable
+    state): the fold or branch point in G of that state, started at the last gap `lo` where
+    it exists; accepted only inside the bisection bracket [lo, hi] (to 1e-6), so it is that
+    state's end and no other critical point (the first one if both are)."""
+    gf, ok, dg = jax.device_get(_state_fold_gap(base, psi, jnp.asarray(lo), 1.0 if state == "up" else -1.0))
+    cands = [(float(gf[i]), float(dg[i]), name) for i, name in enumerate(("fold", "branch_point"))
+             if bool(ok[i]) and lo - 1e-6 <= float(gf[i]) <= hi + 1e-6]
+    if not cands:
+        return {}
+    g, d, kind = min(cands)
+    return dict(state_fold=g, dstate_fold=d, state_end_kind=kind)

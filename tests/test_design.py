@@ -94,7 +94,9 @@ def test_fold_height_gradient_matches_central_difference(problem):
 def multistart():
     z0 = jnp.stack([PARAM.from_values(psi0_deg=70.0, gap=0.5), PARAM.from_values(psi0_deg=100.0, gap=0.4),
                     PARAM.from_values(psi0_deg=50.0, gap=0.6)])
-    return z0, ds.optimize(TERMS, PARAM, z0, n=N, max_iter=25, progress=False)
+    # batch_size=None: one vmap over the starts (the CPU default, "auto", runs them one by
+    # one; test_multistart_under_vmap_equals_loop compares the two)
+    return z0, ds.optimize(TERMS, PARAM, z0, n=N, max_iter=25, progress=False, batch_size=None)
 
 
 def test_multistart_reaches_target_checked_at_finer_mesh(multistart):
@@ -113,7 +115,7 @@ def test_multistart_reaches_target_checked_at_finer_mesh(multistart):
 def test_multistart_under_vmap_equals_loop(multistart):
     z0, res = multistart
     for i in range(z0.shape[0]):
-        one = ds.optimize(TERMS, PARAM, z0[i], n=N, max_iter=25, progress=False)
+        one = ds.optimize(TERMS, PARAM, z0[i], n=N, max_iter=25, progress=False)  # batch_size "auto"
         np.testing.assert_allclose(np.asarray(one.values[0]), np.asarray(res.values[i]), rtol=1e-10, atol=1e-12)
         assert bool(one.reached[0]) == bool(res.reached[i])
 

@@ -124,3 +124,29 @@ def test_cusp_gap_and_derivative_fd(snap):
     assert float(J[0, 0]) > 0  # the cusp moves to larger gaps for wider folds (the paper)
     np.testing.assert_allclose(np.asarray(J), np.asarray(fd), rtol=1e-6)
     np.testing.assert_allclose(r.dcusp_gap_dpsi0_down, float(J[0, 0]), rtol=1e-6)
+
+
+def test_start_state_fold_in_the_gap_and_derivative_fd():
+    """Psi0 = 30 deg: the down state at alpha = 0 ends at a fold in G (the snap-up path's
+    'start_state_lost' end). The Moore-Spence system with the gap as parameter converges from
+    the state just below it to a G_f where the state exists just below and not just above,
+    and dG_f/dPsi0 (implicit differentiation) matches central differences that re-solve it."""
+    import jax.numpy as jnp
+
+    from jaxrod._termination import _state_fold_gap
+
+    n = 40
+    base = jr.make_scene(30.0, 0.5, 0.0, n=n)
+    lo = 0.62  # the down state exists here (G*_up ~ 0.645 at N = 100)
+    gfs, oks, dgs = _state_fold_gap(base, jnp.asarray(math.radians(30.0)), jnp.asarray(lo), -1.0)
+    gf, ok, dg = float(gfs[0]), bool(oks[0]), float(dgs[0])  # the fold (index 0; 1 is the branch point)
+    assert ok and lo < gf < 0.7, gf
+    down = lambda g: jr.initial_state(jr.make_scene(30.0, g, 0.0, n=n), "down").result  # noqa: E731
+    assert down(gf - 1e-4) == jr.RESULTS.successful
+    assert down(gf + 1e-4) == jr.RESULTS.state_not_found
+    h = 1e-4
+    fd = [float(_state_fold_gap(base, jnp.asarray(math.radians(30.0) + s * h), jnp.asarray(lo), -1.0)[0][0])
+          for s in (1.0, -1.0)]
+    fd = (fd[0] - fd[1]) / (2 * h)
+    assert dg > 0  # wider folds keep their down state to larger gaps (as G*_up(Psi0) rises)
+    np.testing.assert_allclose(dg, fd, rtol=1e-5)
