@@ -158,12 +158,12 @@ def _rattle_dt_natural(scene, courant):
     return min(courant * frac_min**2, DT_CAP)
 
 
-def _default_n_fine(scene, solver, dt, t1, courant):
-    """16384 samples; for RATTLE without `dt`, one per step (natural units, at most 2^19,
-    at least 2048), so its step is its largest one rather than a divisor of the grid."""
+def _default_n_fine(scene, solver, dt, t1, courant, substeps=1):
+    """16384 samples; for RATTLE without `dt`, one per (macro) step (natural units, at most
+    2^19, at least 2048), so its step is its largest one rather than a divisor of the grid."""
     if solver not in FIXED_STEP or dt is not None or not isinstance(t1, (int, float)) or not 0 < courant < 0.5:
         return 16384
-    return int(min(max(math.ceil(t1 / _rattle_dt_natural(scene, courant)) + 1, 2048), 2**19))
+    return int(min(max(math.ceil(t1 / (substeps * _rattle_dt_natural(scene, courant))) + 1, 2048), 2**19))
 
 
 @eqx.filter_jit
@@ -171,7 +171,7 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
              stop_at_snap: bool = True, solver: str = "rattle", rtol=1e-8, atol=1e-8, dt=None,
              dissipation: Dissipation = Dissipation(), baumgarte=20.0, n_fine: int | None = None,
              n_frames: int = 64, frame_window=None, max_steps: int | None = None,
-             courant: float = 0.45) -> Trajectory:
+             courant: float = 0.45, substeps: int = 1) -> Trajectory:
     r"""Integrate the strip from angles `theta0` (and rates `omega0`, default 0) under the
     clamp `protocol` for $t\in[0,t_1]$ (see the module docstring).
 
@@ -185,13 +185,20 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     (the cap `DT_CAP` matters below N ~ 48) that divides the fine-grid spacing
     $t_1/(n_{fine}-1)$, so every fine-grid sample is a step point (no interpolation error in
     $v_s$ or the energies; by default `n_fine` is one sample per step); RATTLE is stable
-    below 0.5 (the highest bending mode $4\sqrt{B/\lambda}/h^2$). `max_steps`: default 200 000, or for `"rattle"` enough fixed
+    below 0.5 (the highest bending mode $4\sqrt{B/\lambda}/h^2$). `substeps` (`"rattle"`
+    only): RATTLE steps per diffrax step (default 1); the fine grid then samples every
+    `substeps`-th step and diffrax's per-step work (event, saving) runs that much less often
+    (`benchmarks/results/pyelastica.md` measures the trade). `max_steps`: default 200 000, or for `"rattle"` enough fixed
     steps for $t_1$ when $L=B=\lambda=1$; a run that hits it ends with
     `result == RESULTS.max_steps_reached`.
 
     **Returns:** a [`jaxrod.Trajectory`][].
     """
     check_scene(scene)
+    if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
+        raise ValueError(f"substeps must be a positive integer, got {substeps!r}")
+    if substeps > 1 and solver != "rattle":
+        raise ValueError(f"substeps applies to solver='rattle' only, got solver={solver!r}")
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {solver!r}")
     dtype = jnp.result_type(theta0)
@@ -204,7 +211,7 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     d = discretize(scene)
     args = (scene, protocol, dissipation, jnp.asarray(baumgarte, dtype), d)
     if n_fine is None:
-        n_fine = _default_n_fine(scene, solver, dt, t1, courant)
+        n_fine = _default_n_fine(scene, solver, dt, t1, courant, substeps)
     ts = jnp.linspace(0.0, t1, n_fine)
     if frame_window is None:
         frame_window = (0.0, t1)
@@ -236,14 +243,14 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
             raise ValueError(f"courant must lie in (0, 0.5) (RATTLE's stability limit), got {courant!r}")
         st = scene.strip
         T = st.length**2 * jnp.sqrt(st.line_density / st.bending_stiffness)
-        dt_max = _rattle_dt_natural(scene, courant) * T
+        dt_max = substeps * _rattle_dt_natural(scene, courant) * T
         grid = t1 / (n_fine - 1)
         dt = grid / jnp.ceil(grid / dt_max)
         if max_steps is None:
             steps = 0
             if isinstance(t1, (int, float)):  # natural units L = B = lambda = 1
                 g = t1 / (n_fine - 1)
-                steps = (n_fine - 1) * math.ceil(g / _rattle_dt_natural(scene, courant))
+                steps = (n_fine - 1) * math.ceil(g / (substeps * _rattle_dt_natural(scene, courant)))
             max_steps = max(200_000, steps + 64)
     if max_steps is None:
         max_steps = 200_000
@@ -253,7 +260,9 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     else:
         controller = dfx.ConstantStepSize()
         dt0 = dt
-    if solver in EXPLICIT:
+    if solver == "rattle":
+        slv = Rattle(substeps=substeps)
+    elif solver in EXPLICIT:
         slv = SOLVERS[solver]()
     else:
         slv = SOLVERS[solver](root_finder=dfx.VeryChord(rtol=rtol, atol=atol))
@@ -282,5 +291,5 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
         kinetic=o["kinetic"], clamp_work=o["work"], constraint=o["constraint"], t_frames=tf,
         theta=fr["theta"], positions=fr["positions"], speed=fr["speed"], v_s=v_s, t_peak=t_peak,
         t_cross=t_cross, t_end=t_end, snapped=snapped, kinetic_peak=jnp.max(kin), energy_drift=drift,
-        num_steps=sol.stats["num_steps"], result=sol.result,
+        num_steps=sol.stats["num_steps"] * (substeps if solver == "rattle" else 1), result=sol.result,
     )
