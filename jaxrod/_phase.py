@@ -8,7 +8,8 @@ started at the previous gap's states, accepted when the result is the same state
 (converged, stable, fold height of the same sign, no angle changed by $\pi/2$ or more);
 otherwise (the first gap, a state that stops existing) from the homotopy of
 [`jaxrod.initial_state`][], as `snap_angles` builds them. `warm_starts` (0, 1 or 2) records
-which. Then `snap_angles` runs from those states without its extended-system polish:
+which. Then `snap_angles` runs from those states without its extended-system polish and
+without following the landed branch after a snap (`continue_after_snap=False`):
 $\alpha_c$ is the bisection value, within ~1e-8 rad of the polished one. Homotopy (51 ms
 of 93 ms per scene at N = 100) and polish (31 ms) were the cost; on the 5 x 41 grid at
 N = 100 this takes ~3 s instead of ~16 s, with the same kinds, start codes and landing
@@ -95,7 +96,7 @@ def _chunk(psi0, gaps, s0, mesh):
         eqs, warmed = zip(*[_warm_or_homotopy(scene, jnp.asarray(sgn, dtype), t_prev[i], m_prev[i], ok_prev[i])
                             for i, sgn in enumerate((1.0, -1.0))])
         starts = jax.tree.map(lambda a, b: jnp.stack([a, b]), *eqs)
-        r = _snap_angles_from(scene, starts, Continuation(), jnp.pi, 24, False)
+        r = _snap_angles_from(scene, starts, Continuation(), jnp.pi, 24, False, continue_after_snap=False)
         out = {}
         for name, p in (("up", r.up), ("down", r.down)):
             out[f"alpha_c_{name}"] = jnp.degrees(p.alpha_c)

@@ -56,7 +56,8 @@ class SnapPath(eqx.Module):
     2 branch point), `theta_before`/`force_before` the critical state,
     `fold_height_before`, `theta_after`/`fold_height_after` the state it lands in,
     `branch` the continuation stages (leading axis: stage; a supercritical branch point
-    is followed by a second stage on the asymmetric branch), `result` (a RESULTS code for the start
+    is followed by a second stage on the asymmetric branch, a snap by one on the landed
+    branch unless `continue_after_snap=False`), `result` (a RESULTS code for the start
     state), `refine_result` (the RESULTS code of the extended-system refinement of the
     critical point, `jaxrod.critical_point`; where it fails the bisection values are kept),
     `mode` the critical mode (angle part, unit $L^2$ norm).
@@ -161,7 +162,8 @@ def _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bise
     return branch, snaps, kind, t, m, lam, fb, ta, ma, fa, eq_after.converged
 
 
-def _path(scene, start_eq, direction, parameter, settings, bound, bisections, tol, stages=2):
+def _path(scene, start_eq, direction, parameter, settings, bound, bisections, tol, stages=2,
+          continue_after_snap=True):
     """One direction of the loop. After a loss of stability the critical state is pushed
     along the unstable mode 1e-3 rad past alpha_c and relaxed. If it lands more than
     `JUMP_DISTANCE` away (L2 norm of the angle field) the strip snaps there (to the other
@@ -175,12 +177,16 @@ def _path(scene, start_eq, direction, parameter, settings, bound, bisections, to
             t0, m0, lam0, ok0 = args
             return _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bisections, tol)
 
-        # a path that has already snapped skips its later stages (a real branch outside vmap;
-        # under vmap both sides run, as before)
         args = (t0, m0, lam0, ok & ~done)
-        shapes = jax.eval_shape(run, args)
-        skip = lambda _: jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)  # noqa: E731
-        br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = lax.cond(done, skip, run, args)
+        if continue_after_snap:
+            # after a snap the next stage follows the landed branch (to |alpha| = bound or its
+            # own loss of stability): the post-snap branch of the hysteresis figures
+            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = run(args)
+        else:
+            # skip the later stages of a path that has snapped (a real branch outside vmap)
+            shapes = jax.eval_shape(run, args)
+            skip = lambda _: jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)  # noqa: E731
+            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = lax.cond(done, skip, run, args)
         w = discretize(scene).h
         dist = jnp.sqrt(jnp.sum(w * (ta - t) ** 2))
         jumped = snaps & (dist > JUMP_DISTANCE) & landed
@@ -226,7 +232,7 @@ class SnapAngles(eqx.Module):
 
 @eqx.filter_jit
 def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float = jnp.pi,
-                bisections: int = 24, polish: bool = True) -> SnapAngles:
+                bisections: int = 24, polish: bool = True, continue_after_snap: bool = True) -> SnapAngles:
     r"""Critical clamp angles $\alpha_{c,\rm up}>0$ and $\alpha_{c,\rm down}<0$ of a scene
     under symmetric clamp rotation, their kinds, the states just before and after.
 
@@ -238,6 +244,8 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     $\alpha_c$ is then the bisection value, within ~1e-8 rad of the polished one at
     `bisections=24`, and carries no gradient (`refine_result` and `mode` are `None`).
     Used by [`jaxrod.phase_diagram`][], where the refinement was a third of the cost.
+    `continue_after_snap=False` does not follow the landed branch after a snap (the second
+    `branch` stage is then empty, `count` 0); the critical angles are the same.
 
     The angles are those of the scene's mesh: second-order accurate, off by up to 0.17 deg
     at N = 100 ($s_0=0.02$). For the continuum value use
@@ -251,10 +259,10 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     # `lax.map`, not `vmap`, which would batch the LAPACK kernels inside the Newton loops
     # (see `_phase.py` for the XLA:CPU deadlock that batching caused)
     starts = lax.map(lambda sg: _initial_state(scene, sg), jnp.array([1.0, -1.0], scene.strip.psi0.dtype))
-    return _snap_angles_from(scene_d, starts, settings, bound, bisections, polish)
+    return _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, continue_after_snap)
 
 
-def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish):
+def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, continue_after_snap=True):
     """`snap_angles` from given start states (`starts`: the up and down equilibria of the
     scene at alpha = 0 stacked on a leading axis, as `lax.map` of `_initial_state` makes
     them; a member whose `result` is not successful does not exist)."""
@@ -286,7 +294,8 @@ def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish):
         alt = lax.cond(need_alt, up_start, lambda: arrays(down_eq))
         start = jax.tree.map(lambda u, d, a: jnp.where(direction < 0, u, jnp.where(has_down, d, a)),
                              arrays(up_eq), arrays(down_eq), alt)
-        path = _path(scene, eqx.combine(start, static), direction, parameter, settings, bound, bisections, tol)
+        path = _path(scene, eqx.combine(start, static), direction, parameter, settings, bound, bisections, tol,
+                     continue_after_snap=continue_after_snap)
         br = jax.tree.map(lambda x: x[0], path.branch)  # first stage
         last = br.count - 1
         nxt = (br.lam[last], br.theta[last], br.force[last], path.snaps, path.alpha_c, path.theta_after,
