@@ -85,7 +85,8 @@ def _warm_or_homotopy(scene, sgn, t_prev, m_prev, ok_prev):
 def _chunk(psi0, gaps, s0, mesh):
     """All gaps at one fold angle (rad), one gap after the other (`lax.scan`): the start
     states of each gap by Newton from the previous gap's (homotopy where that fails), then
-    `snap_angles` from them without the extended-system polish (bisection values)."""
+    `snap_angles` from them without the extended-system polish (bisection values) and
+    without following the landed branch."""
     par = SymmetricAlpha()
     dtype = psi0.dtype
     N = mesh.n
@@ -112,8 +113,9 @@ def _chunk(psi0, gaps, s0, mesh):
 
 
 def _attrs(gaps, s0, n, refine):
+    # `variables`: a chunk written by a version with other variables is recomputed
     return {"gaps_hash": ",".join(f"{g:.12g}" for g in gaps), "s0": float(s0), "n": int(n),
-            "refine": float(refine)}
+            "refine": float(refine), "variables": ",".join(VARIABLES)}
 
 
 def _chunk_dataset(psi0_deg, gaps, values, attrs):
