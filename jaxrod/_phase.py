@@ -113,9 +113,10 @@ def _chunk(psi0, gaps, s0, mesh):
 
 
 def _attrs(gaps, s0, n, refine):
-    # `variables`: a chunk written by a version with other variables is recomputed
+    # `chunk_variables` (not `variables`: scipy's netcdf_file has an attribute of that name):
+    # a chunk written by a version with other variables is recomputed
     return {"gaps_hash": ",".join(f"{g:.12g}" for g in gaps), "s0": float(s0), "n": int(n),
-            "refine": float(refine), "variables": ",".join(VARIABLES)}
+            "refine": float(refine), "chunk_variables": ",".join(VARIABLES)}
 
 
 def _chunk_dataset(psi0_deg, gaps, values, attrs):
