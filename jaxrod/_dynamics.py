@@ -150,6 +150,12 @@ def _bending_grads(theta, aL, aR, scene, d):
     return jax.grad(E, argnums=(0, 1, 2))(theta, aL, aR)
 
 
+def inverse_node_mass(d):
+    """1/m of the nodes, 0 at the two end nodes (held by the clamps), shape (N+1,)."""
+    m = d.node_mass
+    return jnp.concatenate([jnp.zeros(1, m.dtype), 1.0 / m[1:-1], jnp.zeros(1, m.dtype)])
+
+
 def node_forces(t, theta, omega, scene, protocol, dissipation, d):
     r"""The applied node forces $\mathbf f_k$ (N+1, 2) of the module docstring (bending pairs,
     hinge viscosity, gravity, damping, drag; no tensions), with what the tension solve and
@@ -190,8 +196,7 @@ def accelerations(t, y, scene, protocol, dissipation, baumgarte, d=None, with_wo
     f, x, v, d, (gL, gR, rL, rR) = node_forces(t, theta, omega, scene, protocol, dissipation, d)
     tt = jnp.stack([jnp.cos(theta), jnp.sin(theta)], -1)
     nn = jnp.stack([-jnp.sin(theta), jnp.cos(theta)], -1)
-    m = d.node_mass
-    invm = jnp.concatenate([jnp.zeros(1, m.dtype), 1.0 / m[1:-1], jnp.zeros(1, m.dtype)])
+    invm = inverse_node_mass(d)
     # prescribed accelerations of the end nodes (node N: Baumgarte-stabilized end condition)
     target = jnp.stack([sc.clamps.gap, jnp.zeros((), x.dtype)])
     a_fix = jnp.zeros_like(x).at[-1].set(-2.0 * baumgarte * v[-1] - baumgarte**2 * (x[-1] - target))

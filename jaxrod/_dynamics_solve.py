@@ -291,5 +291,5 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
         kinetic=o["kinetic"], clamp_work=o["work"], constraint=o["constraint"], t_frames=tf,
         theta=fr["theta"], positions=fr["positions"], speed=fr["speed"], v_s=v_s, t_peak=t_peak,
         t_cross=t_cross, t_end=t_end, snapped=snapped, kinetic_peak=jnp.max(kin), energy_drift=drift,
-        num_steps=sol.stats["num_steps"] * (substeps if solver == "rattle" else 1), result=sol.result,
+        num_steps=sol.stats["num_steps"] * substeps, result=sol.result,  # RATTLE steps (substeps: 1 otherwise)
     )

@@ -78,6 +78,15 @@ def _fold_height(theta, mu, scene):
     return positions(theta, mu, scene)[scene.mesh.n // 2, 1]
 
 
+def _tracked(eq, sgn, theta_prev, scene):
+    """`eq` (solved on `scene` from `theta_prev`) is still the tracked state: converged,
+    stable, fold height of sign `sgn`, and no angle changed by `_MAX_STEP_CHANGE` or more (a
+    jump means the branch was lost, even when Newton lands on a stable state of the right
+    sign, e.g. one wound into loops)."""
+    return (eq.converged & eq.stable & (sgn * _fold_height(eq.theta, eq.force, scene) > 0)
+            & (jnp.max(jnp.abs(eq.theta - theta_prev)) < _MAX_STEP_CHANGE))
+
+
 @eqx.filter_jit
 def initial_state(scene, state: str = "up", *, steps: int = 24, solver: Newton = Newton()) -> Equilibrium:
     r"""The stable up (`state="up"`, $y(L/2)>0$) or down (`"down"`) equilibrium of
@@ -111,11 +120,7 @@ def _initial_state(scene, sgn, *, steps: int = 24, solver: Newton = Newton()) ->
             uc, ua = _path_params(kind, u)
             sc = _deformed(target, uc, ua)
             eq = solve_equilibrium(sc, t, m, solver=solver)
-            good = eq.converged & eq.stable & (sgn * _fold_height(eq.theta, eq.force, sc) > 0)
-            # a jump in some angle means the branch was lost (a snap), even when Newton then
-            # lands on a stable state of the right sign (e.g. one wound into loops)
-            good = good & (jnp.max(jnp.abs(eq.theta - t)) < _MAX_STEP_CHANGE)
-            return (eq.theta, eq.force, ok & good), None
+            return (eq.theta, eq.force, ok & _tracked(eq, sgn, t, sc)), None
 
         us = jnp.arange(1, steps + 1, dtype=dtype) / steps
         (t, m, ok), _ = lax.scan(step, (eq0.theta, eq0.force, ok0), us)

@@ -43,9 +43,8 @@ import numpy as np
 from jax import lax
 
 from ._continuation import Continuation, SymmetricAlpha
-from ._energy.lagrangian import positions
 from ._equilibrium import _float_scene, solve_equilibrium
-from ._initial import _MAX_STEP_CHANGE, _initial_state
+from ._initial import _initial_state, _tracked
 from ._misc import check_param
 from ._rod import Clamps, Mesh, Scene, Strip
 from ._snap import _snap_angles_from
@@ -71,10 +70,7 @@ def _warm_or_homotopy(scene, sgn, t_prev, m_prev, ok_prev):
 
     def warm():
         eq = solve_equilibrium(scene, t_prev, m_prev)
-        fh = positions(eq.theta, eq.force, scene)[scene.mesh.n // 2, 1]
-        good = (eq.converged & eq.stable & (sgn * fh > 0)
-                & (jnp.max(jnp.abs(eq.theta - t_prev)) < _MAX_STEP_CHANGE))
-        return good, jax.tree.map(lambda x, s: jnp.asarray(x, s.dtype), arrays(eq), shapes)
+        return _tracked(eq, sgn, t_prev, scene), jax.tree.map(lambda x, s: jnp.asarray(x, s.dtype), arrays(eq), shapes)
 
     good, eq_w = lax.cond(ok_prev, warm, lambda: (jnp.zeros((), bool), zeros()))
     eq = lax.cond(good, lambda: eq_w, lambda: arrays(_initial_state(scene, sgn)))

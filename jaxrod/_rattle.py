@@ -45,7 +45,7 @@ import diffrax as dfx
 import jax.numpy as jnp
 from jax import lax
 
-from ._dynamics import kinematics, node_forces
+from ._dynamics import inverse_node_mass, kinematics, node_forces
 
 
 def _tri(lower, diag, upper, rhs):
@@ -104,8 +104,7 @@ class Rattle(dfx.AbstractSolver):
         scene, _, _, _, d = args
         (q, _) = y0
         theta, omega = q[0], q[1]
-        m = d.node_mass
-        invm = jnp.concatenate([jnp.zeros(1, m.dtype), 1.0 / m[1:-1], jnp.zeros(1, m.dtype)])
+        invm = inverse_node_mass(d)
         x, v = kinematics(theta, omega, d)
         x = x.at[-1].set(jnp.stack([scene.clamps.gap, jnp.zeros((), x.dtype)]))
         v = project_velocity(x, v.at[-1].set(0.0), invm)
@@ -127,7 +126,6 @@ class Rattle(dfx.AbstractSolver):
             w, st = self._substep(ta, ta + h, w, args, st)
             return w, st
 
-        _, _, _, _, d = args
         w1, st1 = lax.fori_loop(0, k, sub, (y0[1], solver_state)) if k > 1 else sub(0, (y0[1], solver_state))
         x1, v1, th1, _, _, _ = st1
         _, om1 = angles(x1, v1, th1)
@@ -138,8 +136,7 @@ class Rattle(dfx.AbstractSolver):
         """One RATTLE step from the solver state; returns the clamp work and the new state."""
         _, _, _, _, d = args
         x0, v0, th0, f0, p0, mu = solver_state
-        m = d.node_mass
-        invm = jnp.concatenate([jnp.zeros(1, m.dtype), 1.0 / m[1:-1], jnp.zeros(1, m.dtype)])
+        invm = inverse_node_mass(d)
         dt = t1 - t0
         c = 0.5 * dt**2
         xh = x0 + dt * v0 + c * invm[:, None] * f0
