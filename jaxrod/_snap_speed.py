@@ -16,18 +16,22 @@ $L=B=\lambda=1$, MODEL.md):
    smooth in the design where the max-norm has kinks), its sign chosen so that the fold
    moves toward the other state, projected ($\Pi$) onto the end condition by a fixed
    number of Gauss-Newton steps; at rest;
-3. [`jaxrod.simulate`][] with the explicit `solver` (Tsit5) at a constant step `dt`
-   (default $0.15\,(h/L)^2\,T$, $h=L/N$, $T=L^2\sqrt{\lambda/B}$: explicit Runge-Kutta
-   methods are stable only below $\sim0.3\,(h/L)^2T$ for these bending waves, measured at
-   $N=48$: Tsit5 stable at $dt=10^{-4}=0.23\,h^2$, unstable at $2\times10^{-4}$) up to the
-   snap's first overshoot (the run's event) or `t1`; $v_s$ is the maximum of the fold
-   speed sampled on `n_fine` times, refined by the 7-point polynomial of `_refine_peak`.
-   (`simulate` now also has a fixed-step RATTLE solver; `snap_speed` was measured with
-   Tsit5 and keeps it until RATTLE is measured here too.)
+3. [`jaxrod.simulate`][] with a fixed step: by default `solver="rattle"` (symplectic,
+   links and ends exact) at the largest step $\le\min(0.45\,(h_{\min}/L)^2,\
+   2\cdot10^{-4})\,T$ ($T=L^2\sqrt{\lambda/B}$; RATTLE is stable below 0.5 $h^2$) that
+   divides the sample spacing, with one sample per step (`n_fine` $\approx t_1/dt$), so
+   every sample is a step point; or `solver="tsit5"` at $0.15\,(h/L)^2\,T$ on 8192 samples
+   (explicit Runge-Kutta methods are stable only below $\sim0.3\,(h/L)^2T$ for these bending
+   waves, measured at $N=48$: Tsit5 stable at $dt=10^{-4}=0.23\,h^2$, unstable at
+   $2\times10^{-4}$); up to the snap's first overshoot (the run's event) or `t1`; $v_s$ is
+   the maximum of the sampled fold speed, refined by the 7-point polynomial of
+   `_refine_peak`. RATTLE is the default since it was measured here (table below): the same
+   $v_s$ to 5e-4, 3-5x less forward time at N = 24-48 (N = 48: 0.080 s vs 0.43 s) and a
+   gradient 2.6x faster at N = 48 (15 s vs 40 s with compilation).
 
 **Why it is smooth.** Every step is a smooth map of the design $p=(\Psi_0,G,s_0,\dots)$:
 the implicit derivatives of the critical point, a fixed number of projection steps, and a
-fixed-step Runge-Kutta map (no step-size controller, whose accept/reject decisions and
+fixed-step RATTLE or Runge-Kutta map (no step-size controller, whose accept/reject decisions and
 step sequence are piecewise constant in $p$); the maximum of the fold speed is
 differentiable where it is unique (envelope theorem). The event that ends the run
 changes the step count discretely, but it fires after the peak, so $v_s$ does not see it.
@@ -47,30 +51,36 @@ jumps), near the termination gap $G^\ast(\Psi_0)$ (the snap vanishes), where two
 maxima of a snap trade places, and for a branch point the mode's sign is a choice of
 mirror image (both give the same $v_s$ by symmetry).
 
-**Accuracy** (measured; defaults: Tsit5, `nudge` 0.03, `past` 1e-3, `dt` = 0.15 h^2).
-Psi0 = 90 deg, G/L = 0.46, s0 = 0.02 (the study (c) design; a branch point, alpha_c = 80.80
-deg at N = 48). Reference: `jaxrod.snap_dynamics` (brink, its nudge 1e-2 max-norm, adaptive
-Dopri8, rtol = atol = 1e-9) at the same N:
+**Accuracy** (measured; defaults `nudge` 0.03, `past` 1e-3). Psi0 = 90 deg, G/L = 0.46,
+s0 = 0.02 (the study (c) design; a branch point, alpha_c = 80.80 deg at N = 48). Reference:
+`jaxrod.snap_dynamics` (brink, its nudge 1e-2 max-norm, adaptive Dopri8, rtol = atol =
+1e-9) at the same N. RATTLE (the default; forward time after compiling, 2026-12-02) and
+Tsit5 at 0.15 h^2 (2026-11):
 
-| N | snap_speed | reference | difference | snap_speed vs converged |
-|---|---|---|---|---|
-| 16 | 20.4123 | | | +2.0 % |
-| 24 | 20.3323 | 20.3454 | -6.5e-4 | +1.6 % |
-| 32 | 20.2056 | 20.2198 | -7.0e-4 | +0.95 % |
-| 48 | 20.0922 | 20.1053 | -6.5e-4 | +0.38 % |
-| 96 | 20.0307 | 20.0379 | -3.6e-4 | +0.08 % |
-| 192 | 20.0190 | | | +0.02 % |
+| N | RATTLE | steps | time (s) | Tsit5 | reference | RATTLE vs converged |
+|---|---|---|---|---|---|---|
+| 16 | 20.4116 | 3560 | 0.036 | 20.4123 | | +2.0 % |
+| 24 | 20.3323 | 3485 | 0.056 | 20.3323 | 20.3454 | +1.6 % |
+| 32 | 20.2064 | 3463 | 0.065 | 20.2056 | 20.2198 | +0.95 % |
+| 48 | 20.0929 | 3530 | 0.080 | 20.0922 | 20.1053 | +0.39 % |
+| 96 | 20.0389 | 14084 | 0.374 | 20.0307 | 20.0379 | +0.12 % |
+| 192 | 20.0283 | 56299 | 3.01 | 20.0190 | | +0.07 % |
 
-"Converged": 20.015, Richardson (order 2) of N = 96 and 192 (the differences shrink 5.3x
-from 48-96 to 96-192; below N ~ 50 the mesh does not resolve the fold, h > s0, and the
+"Converged": ~20.015-20.025 (Richardson, order 2, of N = 96 and 192: 20.015 from Tsit5,
+20.025 from RATTLE; below N ~ 50 the mesh does not resolve the fold, h > s0, and the
 convergence is pre-asymptotic). So the design mesh N = 48 is within 0.4 % (1 % asked).
-The same-N difference is the start (nudge 0.03 RMS here vs 0.01 max-norm there): with the
-same start (`jaxrod.brink`, nudge 0.05) the fixed step alone differs from Dopri8 1e-9 by
-9e-6 at N = 48 (dt = 1e-4: 20.08297 vs 20.08314), and the brink's v_s moves by 1.1e-3
-between nudges 0.01 and 0.05. At the study (b) corner G/L = 0.3: N = 48 vs 96 gives
-37.654 vs 37.548 (Psi0 = 30 deg, +0.28 %) and 35.955 vs 35.778 (45 deg, +0.50 %). Cost at
-N = 48: ~10^4 steps (t_end ~ 0.7 T), ~0.5 s forward after compiling; a gradient is one
-reverse pass (checkpointed, a few times the forward cost).
+Below N ~ 48 RATTLE's step is capped at 2e-4 T (the crease's fast rotation, not stability,
+sets the error there), hence ~3500 steps. The same-N difference from the reference is
+mostly the start (nudge 0.03 RMS here vs 0.01 max-norm there): with the same start
+(`jaxrod.brink`, nudge 0.05) Tsit5's fixed step alone differs from Dopri8 1e-9 by 9e-6 at
+N = 48 (dt = 1e-4: 20.08297 vs 20.08314), and the brink's v_s moves by 1.1e-3 between
+nudges 0.01 and 0.05. RATTLE's energy error is bounded (symplectic) but larger than
+Tsit5's: 6e-4 of the start's potential here, up to 2.5e-3 at the fast corner Psi0 = 10 deg,
+G/L = 0.3, N = 16 (where RATTLE's v_s is 1.05 % below Tsit5's; 1.8e-4 at N = 48), hence
+`max_drift` 1e-2 for RATTLE (a step beyond its stability limit gives ~1e3-1e4) and 1e-3
+for the Runge-Kutta schemes. At the study (b) corner G/L = 0.3 (Tsit5): N = 48 vs 96
+gives 37.654 vs 37.548 (Psi0 = 30 deg, +0.28 %) and 35.955 vs 35.778 (45 deg, +0.50 %).
+A gradient is one reverse pass (checkpointed, a few times the forward cost).
 
 **Smoothness, measured.** At N = 16 the AD gradient equals central differences to
 ~1e-5 or better when the FD steps are 1e-5 to 3e-4; below ~1e-6 the differences see a
@@ -88,15 +98,39 @@ import jax.numpy as jnp
 
 from ._dynamics import Protocol
 from ._dynamics_scenes import _direction, project
-from ._dynamics_solve import simulate
+from ._dynamics_solve import FIXED_STEP, _rattle_dt_natural, simulate
 from ._energy.geometry import discretize
 from ._misc import check_param
 from ._snap import snap_angles
 from ._solution import RESULTS
 
 
-def default_dt(scene):
-    r"""The default constant step in units of $T=L^2\sqrt{\lambda/B}$: $0.15\,(h_{\min}/L)^2$."""
+RATTLE_COURANT = 0.45
+# RATTLE's energy error is bounded and oscillates (symplectic), O(dt^2): measured up to
+# 2.5e-3 of the start's potential at Psi0 = 10 deg, G/L = 0.3, N = 16 (a fast snap), 7e-4 at
+# (60 deg, 0.5); one step beyond its stability limit (Courant 0.52 at N = 48) gives 9e3.
+RATTLE_MAX_DRIFT = 1e-2
+
+
+def default_n_fine(scene, solver="rattle", t1=2.0):
+    """The default number of samples on [0, t1]: for RATTLE one per step of its natural step
+    `min(0.45 (h_min/L)^2, DT_CAP)` T (so every sample is a step point and the step is its
+    largest), otherwise 8192 (Tsit5's dense output interpolates between steps)."""
+    if solver in FIXED_STEP:
+        return int(math.ceil(t1 / _rattle_dt_natural(scene, RATTLE_COURANT))) + 1
+    return 8192
+
+
+def default_dt(scene, solver="rattle", t1=2.0, n_fine=None):
+    r"""The default constant step in units of $T=L^2\sqrt{\lambda/B}$. RATTLE: the largest
+    step not above $\min(0.45\,(h_{\min}/L)^2,\ 2\cdot10^{-4})$ that divides the sample
+    spacing $t_1/(n_{fine}-1)$ (every sample a step point: RATTLE's output between steps is
+    linear); Tsit5 and the other explicit Runge-Kutta schemes: $0.15\,(h_{\min}/L)^2$."""
+    if solver in FIXED_STEP:
+        if n_fine is None:
+            n_fine = default_n_fine(scene, solver, t1)
+        grid = t1 / (n_fine - 1)
+        return grid / math.ceil(grid / _rattle_dt_natural(scene, RATTLE_COURANT) - 1e-9)
     f = scene.mesh.fractions
     h = min(f[i + 1] - f[i] for i in range(scene.mesh.n))
     return 0.15 * float(h) ** 2
@@ -188,26 +222,33 @@ def _options(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
     check_param("nudge", nudge, lo=0.0)
     check_param("past", past, lo=0.0, lo_open=False)
     check_param("t1", t1, lo=0.0)
+    if max_drift is None:
+        max_drift = RATTLE_MAX_DRIFT if solver in FIXED_STEP else 1e-3
     check_param("max_drift", max_drift, lo=0.0)
-    if dt is None:
-        dt = default_dt(scene)
-    check_param("dt", dt, lo=0.0)
+    if n_fine is None:
+        n_fine = default_n_fine(scene, solver, float(t1))
     if not isinstance(n_fine, int) or n_fine < 16:
         raise ValueError(f"n_fine: must be an integer >= 16, got {n_fine!r}")
+    if dt is None:
+        dt = default_dt(scene, solver, float(t1), n_fine)
+    check_param("dt", dt, lo=0.0)
     if scene.stretching is not None:
         raise ValueError("stretching: the dynamics are exactly inextensible; use stretching=None")
     return (direction, float(nudge), float(past), float(dt), float(t1), n_fine, solver, float(max_drift))
 
 
-def snap_speed(scene, direction="up", *, nudge=0.03, past=1e-3, dt=None, t1=2.0, n_fine=8192, solver="tsit5",
-               max_drift=1e-3):
+def snap_speed(scene, direction="up", *, nudge=0.03, past=1e-3, dt=None, t1=2.0, n_fine=None, solver="rattle",
+               max_drift=None):
     r"""The snapping speed $v_s$ of the `direction` ("up" or "down") quasi-static snap of
     `scene` (symmetric actuation; the scene's clamp angles are ignored), differentiable in
     the scene's float leaves ($\Psi_0$, $G$, $s_0$, ...) in forward and reverse mode.
 
     The brink snap (start at the critical state nudged by `nudge` rad RMS along the
-    unstable mode, clamps held `past` rad beyond $\alpha_c$) integrated by `solver` with the
-    constant step `dt` (default $0.15\,(L/N)^2\sqrt{\lambda/B}$) on $[0,$`t1`$]$; the module
+    unstable mode, clamps held `past` rad beyond $\alpha_c$) integrated by `solver` (default
+    `"rattle"`, or `"tsit5"`) with the constant step `dt` (default: RATTLE's
+    $\le\min(0.45\,h_{\min}^2, 2\cdot10^{-4})$, Tsit5's $0.15\,h_{\min}^2$, in units of $T$) on
+    $[0,$`t1`$]$, sampled `n_fine` times (default: every RATTLE step; 8192 for Tsit5);
+    `max_drift` the largest energy drift trusted (default 1e-2 RATTLE, 1e-3 else); the module
     docstring says why that is smooth and where it is not differentiable. Returns NaN where
     there is no snap (or the run failed one of its checks, see the module docstring).
     [`snap_speed_run`][] returns the diagnostics.
@@ -217,8 +258,8 @@ def snap_speed(scene, direction="up", *, nudge=0.03, past=1e-3, dt=None, t1=2.0,
 
     **Accuracy** (measured at Psi0 = 90 deg, G/L = 0.46, s0 = 0.02; table in the module
     docstring): at N = 48, within 0.4 % of the converged v_s (Richardson from N = 96, 192),
-    6.5e-4 from `jaxrod.snap_dynamics` with adaptive Dopri8 at rtol = atol = 1e-9 on the same
-    mesh (the different nudge; the fixed step alone: 9e-6); at N = 16, +2 %.
+    6e-4 from `jaxrod.snap_dynamics` with adaptive Dopri8 at rtol = atol = 1e-9 on the same
+    mesh (mostly the different nudge); at N = 16, +2 %.
     """
     opts = _options(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift)
     if any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(scene)):
@@ -234,8 +275,8 @@ def _speed_jit(scene, opts):
     return _speed(scene, opts=opts)
 
 
-def snap_speed_run(scene, direction="up", *, nudge=0.03, past=1e-3, dt=None, t1=2.0, n_fine=8192,
-                   solver="tsit5", max_drift=1e-3) -> SpeedRun:
+def snap_speed_run(scene, direction="up", *, nudge=0.03, past=1e-3, dt=None, t1=2.0, n_fine=None,
+                   solver="rattle", max_drift=None) -> SpeedRun:
     """`snap_speed` with its diagnostics (a [`SpeedRun`][]; not differentiable in forward mode)."""
     opts = _options(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift)
     return _run_jit(scene, opts)
