@@ -10,7 +10,8 @@ What is measured (scene: s0 = 0.02 L, uniform mesh, n = 100):
 
 * `jr.termination_gap(psi0, tol=1e-5)`: gap_up, gap_down (scan + bisection on
   `snap_angles`), their brackets, what ends each path, the cusp gap of a fold path and
-  dG_c/dPsi0 (implicit differentiation), number of `snap_angles` calls, wall time
+  dG_c/dPsi0 (implicit differentiation), the same end by two-parameter continuation of the
+  fold in (G, alpha) (`jr.continue_critical`), number of `snap_angles` calls, wall time
   (compilation included for the first Psi0, reported separately);
 * side by side at (60 deg, G/L = 0.5): steady time of one `snap_angles` call (continuation +
   bisection + landing + extended-system refinement) and of the refinement alone
@@ -100,8 +101,9 @@ def main():
         path.write_text(json.dumps(rec, indent=1))
     lines = ["# Termination gap G*(Psi0), n = 100, s0 = 0.02 L", "",
              "| Psi0 (deg) | G*_up | ends by | start-state fold G_f (up) | dG_f/dPsi0 (1/rad) | G*_down | ends by "
-             "| cusp G_c (down) | dG_c/dPsi0 (1/rad) | snap_angles calls | wall (s) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| cusp G_c (down) | dG_c/dPsi0 (1/rad) | fold curve's turn (continuation, down) | its points "
+             "| snap_angles calls | wall (s) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
     def fmt(x, f="{:.5f}"):
         return "-" if x is None else f.format(x)
@@ -110,6 +112,7 @@ def main():
         lines.append(f"| {key} | {fmt(row['gap_up'])} | {row['reason_up']} | {fmt(row.get('state_fold_gap_up'), '{:.6f}')} | "
                      f"{fmt(row.get('dstate_fold_gap_dpsi0_up'), '{:.4f}')} | {fmt(row['gap_down'])} | "
                      f"{row['reason_down']} | {fmt(row['cusp_gap_down'])} | {fmt(row['dcusp_gap_dpsi0_down'], '{:.4f}')} | "
+                     f"{fmt(row.get('curve_end_gap_down'))} | {row.get('curve_points_down', 0) or '-'} | "
                      f"{row['evaluations']} | {row['wall_s']:.1f} |")
     ref = rec["refinement"]
     lines += ["", "G*_up (bisection midpoint, bracket 1e-5) ends where the snap-up path's start, the down state at "
@@ -117,7 +120,10 @@ def main():
               "with the gap as parameter, a fold in G at every Psi0 here, inside the bracket each time) and "
               "dG_f/dPsi0 its implicit derivative (tests/test_termination.py checks it against central "
               "differences). G_c is the cusp where the snap-down path's fold pair meets (G_c > G*_down: just "
-              "below G_c the jump is too small to count as a snap)."]
+              "below G_c the jump is too small to count as a snap). The fold curve's turn is the same end reached by "
+              "two-parameter continuation (`jr.continue_critical`): the snap-down fold of the largest grid gap that "
+              "snaps, followed in (G, alpha) until G turns back (Hermite estimate of the turn; the cusp solved from "
+              "the curve's last point agrees with G_c to 1e-9)."]
     lines += ["", "Side by side at Psi0 = 60 deg, G/L = 0.5 (steady, median of 5):", "",
               "| snap_angles (s) | extended-system refinement, both paths (s) | ratio |", "|---|---|---|",
               f"| {ref['snap_angles_s']:.3f} | {ref['refinement_both_paths_s']:.3f} | {ref['ratio']:.3f} |", "",

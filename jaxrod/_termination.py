@@ -38,7 +38,12 @@ criterion: [`jaxrod.cusp_point`][] solves the fold system augmented by the gap a
 vanishing cubic coefficient $\tilde{\mathcal L}^{(3)}[v,v,v]=0$, from the fold at $G^\ast_-$,
 giving the cusp gap $G_c\ (\ge G^\ast)$ and $dG_c/d\Psi_0$ by implicit differentiation
 (`cusp_gap_*`, `dcusp_gap_dpsi0_*`). Between $G^\ast$ and $G_c$ the fold pair still exists
-but its jump is below the snap criterion. For a path whose start state is lost, the end
+but its jump is below the snap criterion. The same end is also reached by two-parameter
+continuation, as a demanding user would compute it: the fold of the largest grid gap that
+snaps is followed in (G, alpha) by [`jaxrod.continue_critical`][] until G turns back, which
+for a fold curve is exactly the cusp (`curve_end_gap_*`, Hermite estimate of the turn;
+`curve_cusp_gap_*`, the cusp solved from the last point before it; `tests/test_termination.py`
+checks both against `cusp_gap_*`). For a path whose start state is lost, the end
 is likewise located exactly: the start state (up or down at $\alpha=0$) ends at a fold in
 $G$ or turns unstable at a symmetry-breaking branch point in $G$; both extended systems of
 [`jaxrod.critical_point`][] are solved with the gap as their parameter (at $\alpha=0$), from
@@ -81,7 +86,12 @@ class TerminationGap(NamedTuple):
     whose start state is lost, `state_fold_gap_*` the exact gap $G_f$ where that state (at
     $\alpha=0$) ends, `state_end_kind_*` how ("fold" in $G$, or "branch_point": it turns
     unstable through an asymmetric mode; "none" if not located), and
-    `dstate_fold_gap_dpsi0_*` $dG_f/d\Psi_0$; NaN otherwise."""
+    `dstate_fold_gap_dpsi0_*` $dG_f/d\Psi_0$; NaN otherwise. For a path that ends at a
+    cusp, also the end found by two-parameter continuation of its fold in (G, alpha)
+    ([`jaxrod.continue_critical`][], from the largest grid gap that snaps):
+    `curve_end_reason_*` ("turn" where G turns back: the cusp), `curve_points_*`,
+    `curve_end_gap_*` (the turn, Hermite estimate) and `curve_cusp_gap_*` (the cusp solved
+    from the last point before the turn)."""
 
     psi0_deg: float
     gap_up: float
@@ -107,6 +117,14 @@ class TerminationGap(NamedTuple):
     dstate_fold_gap_dpsi0_down: float = math.nan
     state_end_kind_up: str = "none"
     state_end_kind_down: str = "none"
+    curve_end_gap_up: float = math.nan
+    curve_end_gap_down: float = math.nan
+    curve_cusp_gap_up: float = math.nan
+    curve_cusp_gap_down: float = math.nan
+    curve_points_up: int = 0
+    curve_points_down: int = 0
+    curve_end_reason_up: str = "none"
+    curve_end_reason_down: str = "none"
 
     def to_dict(self):
         def clean(x):
@@ -218,6 +236,11 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
                              alpha=float(p["alpha"]), jump=jump)
         if reason == "cusp":
             results[name].update(_cusp(base, psi, lo, p))
+            # the same end by two-parameter continuation of the critical point in (G, alpha),
+            # from the largest grid gap where the path snaps (kind fold there too)
+            p_grid = scan[i][1][name]
+            if KIND_NAMES[int(p_grid["kind"])] == "fold":
+                results[name].update(_curve_end(base, psi, grid[i], p_grid))
         elif reason == "start_state_lost":
             results[name].update(_start_fold(base, psi, lo, hi, "down" if name == "up" else "up"))
     if bar is not None:
@@ -229,7 +252,11 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
                           u.get("cusp", nan), d.get("cusp", nan), u.get("dcusp", nan), d.get("dcusp", nan),
                           u.get("state_fold", nan), d.get("state_fold", nan),
                           u.get("dstate_fold", nan), d.get("dstate_fold", nan),
-                          u.get("state_end_kind", "none"), d.get("state_end_kind", "none"))
+                          u.get("state_end_kind", "none"), d.get("state_end_kind", "none"),
+                          u.get("curve_end_gap", nan), d.get("curve_end_gap", nan),
+                          u.get("curve_cusp_gap", nan), d.get("curve_cusp_gap", nan),
+                          u.get("curve_points", 0), d.get("curve_points", 0),
+                          u.get("curve_end_reason", "none"), d.get("curve_end_reason", "none"))
 
 
 @eqx.filter_jit
@@ -243,6 +270,35 @@ def _cusp_gap(base, psi0, gap, theta, force, alpha, mode):
 
     gc, dg, ok = jax.jvp(g, (psi0,), (jnp.ones_like(psi0),), has_aux=True)
     return gc, ok, dg
+
+
+@eqx.filter_jit
+def _fold_curve(base, psi0, gap, theta, force, alpha, mode):
+    """Refine the fold at `gap` and follow it in (G, alpha) to where it turns in G."""
+    from ._critical import critical_point
+    from ._critical_curve import continue_critical
+
+    scene = eqx.tree_at(lambda s: (s.strip.psi0, s.clamps.gap), base, (psi0, gap))
+    cp = critical_point(scene, theta, force, alpha, mode, 1)
+    c = continue_critical(scene, cp, kind=1)
+    return dict(ok=cp.result == RESULTS.successful, end_gap=c.end_gap, end_reason=c.end_reason, count=c.count,
+                cusp_gap=c.cusp.gap, cusp_ok=c.cusp.result == RESULTS.successful)
+
+
+def _curve_end(base, psi, gap, p):
+    """Two-parameter continuation of a fold path's critical point from the grid gap `gap`
+    (where it snaps) to the end of its curve (the cusp, where G turns)."""
+    from ._critical_curve import END_REASONS
+
+    o = jax.device_get(_fold_curve(base, psi, jnp.asarray(gap), jnp.asarray(p["theta"]), jnp.asarray(p["force"]),
+                                   jnp.asarray(p["alpha"]), jnp.asarray(p["mode"])))
+    if not bool(o["ok"]):
+        return {}
+    out = dict(curve_end_reason=END_REASONS.get(int(o["end_reason"]), "none"), curve_points=int(o["count"]),
+               curve_end_gap=float(o["end_gap"]))
+    if bool(o["cusp_ok"]):
+        out["curve_cusp_gap"] = float(o["cusp_gap"])
+    return out
 
 
 def _cusp(base, psi, gap, p):

@@ -119,6 +119,10 @@ def test_cusp_gap_and_derivative_fd(snap):
     assert cp.result == jr.RESULTS.successful and float(cp.residual) < 1e-10
     r = jr.termination_gap(60.0, tol=1e-4)
     assert r.gap_down <= float(cp.gap) < 1.0 and abs(r.cusp_gap_down - float(cp.gap)) < 1e-8
+    # the same end by two-parameter continuation of the fold in (G, alpha) from the grid
+    assert r.curve_end_reason_down == "turn" and r.curve_points_down >= 3
+    assert abs(r.curve_end_gap_down - float(cp.gap)) < 1e-4
+    assert abs(r.curve_cusp_gap_down - float(cp.gap)) < 1e-8
     J = jax.jacfwd(gc)(jnp.asarray(x0))
     fd = central_difference(gc, x0)
     assert float(J[0, 0]) > 0  # the cusp moves to larger gaps for wider folds (the paper)
