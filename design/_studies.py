@@ -270,14 +270,17 @@ def fastest_snap_study(min_gap=0.3, *, s0=0.02, psi0_bounds=(10.0, 180.0), max_g
     1e-3 of the gap bound. The run stops when stationary, without descent or after
     `max_iter`; the best design is re-checked on `n_check` segments.
 
-    Measured (N = 48, check N = 96, from Psi0 = 90 deg, G/L = 0.5: v_s = 18.77 v*; 30
-    iterations, 341 s on a heavily loaded 2-core machine): G/L -> 0.3 (the bound, after 5
-    iterations), Psi0 = 28.39 deg, v_s = 37.721 v* (check 37.684, 0.1 %). A sweep at G/L = 0.3
-    on the same mesh gives 37.509, 37.751, 37.779, 37.721, 37.601 at Psi0 = 20, 24, 26, 28.4,
-    31 deg: the maximum is interior, near 25-26 deg, 0.15 % above the design found. The
+    Measured (N = 48, check N = 96, from Psi0 = 90 deg, G/L = 0.5; `jaxrod.snap_speed` with
+    RATTLE, benchmarks/results/design.md, 2026-12-02): 20 iterations, 94.5 s with
+    compilation: G/L -> 0.3 (the bound), Psi0 = 23.56 deg, v_s = 37.725 v* (check 37.716,
+    0.02 %). A snap_speed grid on the same mesh (benchmarks/certify_study_b.py,
+    results/study_b_grid.md) has its maximum at Psi0 = 26.5 deg, G/L = 0.3: 37.771 v*, so
+    the design is 0.12 % below it (earlier, with Tsit5: 28.39 deg, 0.15 % below); v_s
+    falls with G/L (grid maxima 37.02, 35.78, 33.44 at G/L = 0.32, 0.35, 0.40), so the bound
+    is the optimum in G/L, and the maximum in Psi0 is interior. The
     far-goal Gauss-Newton model is linear and does not see the curvature of v_s in Psi0, so
-    its steps overshoot near the maximum and are rejected; the last 18 iterations made no
-    progress. The paper's plane (v_s falling in G/L and in Psi0) would put the optimum at
+    its steps overshoot near the maximum and are rejected (the earlier Tsit5 run: no
+    progress in its last 18 iterations). The paper's plane (v_s falling in G/L and in Psi0) would put the optimum at
     the gap bound and the smallest Psi0; jaxrod agrees on the gap, not on Psi0."""
     _needs_dynamics("fastest_snap_study")
     import time

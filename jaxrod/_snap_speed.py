@@ -26,8 +26,9 @@ $L=B=\lambda=1$, MODEL.md):
    $2\times10^{-4}$); up to the snap's first overshoot (the run's event) or `t1`; $v_s$ is
    the maximum of the sampled fold speed, refined by the 7-point polynomial of
    `_refine_peak`. RATTLE is the default since it was measured here (table below): the same
-   $v_s$ to 5e-4, 3-5x less forward time at N = 24-48 (N = 48: 0.080 s vs 0.43 s) and a
-   gradient 2.6x faster at N = 48 (15 s vs 40 s with compilation).
+   $v_s$ to 5e-4, less forward time from N ~ 24 on (1.6x at N = 24: 0.056 s vs 0.089 s;
+   2.5x at 32; 5x at 48: 0.080 s vs 0.43 s; equal at N = 16) and a gradient 2.6x faster at
+   N = 48 (15 s vs 40 s with compilation).
 
 **Why it is smooth.** Every step is a smooth map of the design $p=(\Psi_0,G,s_0,\dots)$:
 the implicit derivatives of the critical point, a fixed number of projection steps, and a
