@@ -81,6 +81,12 @@ class CriticalCurve(eqx.Module):
     mode: Array
 
 
+def _hermite(fa, fb, da, db):
+    """Quadratic and cubic coefficients of the Hermite cubic on u in [0, 1] with values
+    fa, fb and derivatives da, db at its ends: f(u) = fa + da u + c2 u^2 + c3 u^3."""
+    return 3 * (fb - fa) - 2 * da - db, -2 * (fb - fa) + da + db
+
+
 def _weights(h, N, kind):
     """Arclength weights on w = (theta, mu, alpha, v_theta, v_mu, G): the angles (L^2), alpha
     and G; the forces and the mode do not count (the end force and the mode force are large
@@ -216,8 +222,7 @@ def _continue_critical(scene, cp, direction, gap_bounds, parameter, ds, ds_min, 
     S = jnp.sqrt(jnp.sum(W * (w - wp) ** 2))
     g_a, g_b, d_a, d_b = wp[ia], w[ia], tp[ia] * S, t[ia] * S  # derivatives per unit u = s / S
     # G(u) = g_a + d_a u + c2 u^2 + c3 u^3 on [0, 1]
-    c2 = 3 * (g_b - g_a) - 2 * d_a - d_b
-    c3 = -2 * (g_b - g_a) + d_a + d_b
+    c2, c3 = _hermite(g_a, g_b, d_a, d_b)
     # G'(u) = d_a + 2 c2 u + 3 c3 u^2 = 0: the root in [0, 1]
     qa, qb, qc = 3 * c3, 2 * c2, d_a
     disc = jnp.sqrt(jnp.maximum(qb * qb - 4 * qa * qc, 0.0))
@@ -230,8 +235,7 @@ def _continue_critical(scene, cp, direction, gap_bounds, parameter, ds, ds_min, 
     a_a, a_b = unpack(wp[:-1], N)[2], unpack(w[:-1], N)[2]
     ia_ = N + 2 if kind != KIND_BRANCH_POINT else N // 2 + 1  # alpha
     da_a, da_b = tp[ia_] * S, t[ia_] * S
-    e2 = 3 * (a_b - a_a) - 2 * da_a - da_b
-    e3 = -2 * (a_b - a_a) + da_a + da_b
+    e2, e3 = _hermite(a_a, a_b, da_a, da_b)
     a_end = a_a + da_a * u + e2 * u**2 + e3 * u**3
     g_end = jnp.where(turn, g_end, w[ia])
     a_end = jnp.where(turn, a_end, unpack(w[:-1], N)[2])
