@@ -45,7 +45,7 @@ import diffrax as dfx
 import jax.numpy as jnp
 from jax import lax
 
-from ._dynamics import inverse_node_mass, kinematics, node_forces
+from ._dynamics import _bending_grads, inverse_node_mass, kinematics, safe_norm
 
 
 def _tri(lower, diag, upper, rhs):
@@ -54,9 +54,36 @@ def _tri(lower, diag, upper, rhs):
 
 def _spread(mu, dx):
     """G^T mu: link i pulls node i+1 by +mu_i dx_i and node i by -mu_i dx_i, (N+1, 2)."""
-    p = mu[:, None] * dx
-    z = jnp.zeros((dx.shape[0] + 1, 2), dx.dtype)
-    return z.at[1:].add(p).at[:-1].add(-p)
+    return _pair(mu[:, None] * dx)
+
+
+def _pair(p):
+    """Node sums of link forces: +p_i on node i+1, -p_i on node i, (N+1, 2). Pads rather
+    than scatter-adds (XLA:CPU fuses pads; its scatters are loops of their own)."""
+    return jnp.pad(p, ((1, 0), (0, 0))) - jnp.pad(p, ((0, 1), (0, 0)))
+
+
+def rattle_forces(t, theta, omega, x, v, args):
+    r"""`jaxrod._dynamics.node_forces` from RATTLE's own Cartesian state: the same applied
+    forces (bending pairs $\pm(Q_i/h_i)\mathbf n_i$, hinge viscosity, gravity, damping,
+    drag), with $\mathbf n_i=(-\Delta y_i,\Delta x_i)/h_i$ from the links and the damping and
+    drag at the given node velocities `v`, instead of re-deriving both from $(\theta,\dot\theta)$
+    by trigonometry and cumulative sums (25 % of a step at N = 50). Returns `(f, clamp power)`."""
+    scene, protocol, dissipation, _, d = args
+    aL, aR, rL, rR = protocol.angles(t)
+    gE, gL, gR = _bending_grads(theta, jnp.asarray(aL, theta.dtype), jnp.asarray(aR, theta.dtype), scene, d)
+    full_rate = jnp.concatenate([rL[None], omega, -rR[None]])
+    tau = dissipation.viscosity * jnp.diff(full_rate) / d.ell  # (N+1,) hinge viscous moments
+    Q = -gE + (tau[1:] - tau[:-1])
+    dx = jnp.diff(x, axis=0)
+    nn = jnp.stack([-dx[:, 1], dx[:, 0]], -1) / d.h[:, None]
+    f = _pair((Q / d.h)[:, None] * nn)
+    m = d.node_mass
+    if scene.gravity is not None:
+        f = f.at[:, 1].add(-m * scene.gravity.g)
+    f = f - dissipation.damping * m[:, None] * v
+    f = f - dissipation.drag * (m / scene.strip.line_density)[:, None] * safe_norm(v)[:, None] * v
+    return f, gL * rL + gR * rR
 
 
 def project_velocity(x, w, invm):
@@ -95,11 +122,6 @@ class Rattle(dfx.AbstractSolver):
     def order(self, terms):
         return 2
 
-    def _forces(self, t, theta, omega, args):
-        scene, protocol, dissipation, _, d = args
-        f, _, _, d, (gL, gR, rL, rR) = node_forces(t, theta, omega, scene, protocol, dissipation, d)
-        return f, gL * rL + gR * rR
-
     def init(self, terms, t0, t1, y0, args):
         scene, _, _, _, d = args
         (q, _) = y0
@@ -108,7 +130,7 @@ class Rattle(dfx.AbstractSolver):
         x, v = kinematics(theta, omega, d)
         x = x.at[-1].set(jnp.stack([scene.clamps.gap, jnp.zeros((), x.dtype)]))
         v = project_velocity(x, v.at[-1].set(0.0), invm)
-        f, p = self._forces(t0, theta, omega, args)
+        f, p = rattle_forces(t0, theta, omega, x, v, args)
         mu = jnp.zeros(theta.shape, theta.dtype)
         return x, v, theta, f, p, mu
 
@@ -155,11 +177,11 @@ class Rattle(dfx.AbstractSolver):
             lo = c * invm[1:-1] * jnp.sum(dx1[1:] * dx0[:-1], -1)
             return mu - _tri(jnp.concatenate([z, lo]), diag, jnp.concatenate([up, z]), r)
 
-        mu = lax.fori_loop(0, self.shake_iters, newton, mu)
+        mu = lax.fori_loop(0, self.shake_iters, newton, mu, unroll=True)
         x1 = x_of(mu)
         vh = (x1 - x0) / dt
         th1, omh = angles(x1, vh, th0)
-        f1, p1 = self._forces(t1, th1, omh, args)
+        f1, p1 = rattle_forces(t1, th1, omh, x1, vh, args)
         v1 = project_velocity(x1, vh + 0.5 * dt * invm[:, None] * f1, invm)
         return w0 + 0.5 * dt * (p0 + p1), (x1, v1, th1, f1, p1, mu)
 
