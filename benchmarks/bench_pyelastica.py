@@ -384,6 +384,18 @@ def _label(solver, tol):
     return f"RATTLE Courant {tol:.2f}" if solver == "rattle" else f"Tsit5 tol {tol:.0e}"
 
 
+def _row_ratio(pye, jx):
+    """PyElastica row's wall time over the fastest jaxrod run at least as accurate ('' if none)."""
+    err = pye.get("rel_err")
+    if err is None or not math.isfinite(err) or pye.get("wall_s", 0) <= 0:
+        return ""
+    ok = [r for r in jx if math.isfinite(r["rel_err"]) and r["rel_err"] <= err]
+    if not ok:
+        return "none as accurate"
+    r = min(ok, key=lambda r: r["wall_s"])
+    return f"{pye['wall_s'] / r['wall_s']:.1f}x ({_label(r.get('solver', 'tsit5'), r['tol'])})"
+
+
 def write_md(out, path):
     info = out["info"]
     L = [f"# jaxrod vs PyElastica: snap dynamics at matched accuracy ({info['date']})", "",
@@ -413,18 +425,19 @@ def write_md(out, path):
         "jaxrod's excludes its XLA compilation (column 'compile').", ""]
     for c in out["cases"]:
         s = c["summary"]
-        L += [f"## {s['protocol']}, N = {s['n']}", "", "| tool | settings | v_s | rel. err | steps | wall (s) |",
-              "|---|---|---|---|---|---|"]
+        L += [f"## {s['protocol']}, N = {s['n']}", "",
+              "| tool | settings | v_s | rel. err | steps | wall (s) | ratio (PyElastica rows: wall / that of the "
+              "fastest jaxrod run at least as accurate) |", "|---|---|---|---|---|---|---|"]
         r = c["reference"]
         L.append(f"| jaxrod (reference) | Tsit5 tol {r['tol']:.0e} | {r['v_s']:.7f} | 0 | {r['steps']} | "
-                 f"{r['wall_s']:.2f} (incl. compile) |")
+                 f"{r['wall_s']:.2f} (incl. compile) | |")
         for r in c["jaxrod"]:
             L.append(f"| jaxrod | {_label(r.get('solver', 'tsit5'), r['tol'])} | {r['v_s']:.7f} | {r['rel_err']:.1e} | {r['steps']} | "
-                     f"{r['wall_s']:.3f} |")
+                     f"{r['wall_s']:.3f} | |")
         for r in c["pyelastica"]:
             L.append(f"| PyElastica ({r['role']}) | {r['clamp']} clamp, dt {r['dt']:.3g}, r {r['radius']:g} "
                      f"(EA {r['EA']:.3g}), filter {r['filter_order'] or 'none'} | {r['v_s']:.7f} | "
-                     f"{r['rel_err']:.1e} | {r['steps']} | {r['wall_s']:.2f} |")
+                     f"{r['rel_err']:.1e} | {r['steps']} | {r['wall_s']:.2f} | {_row_ratio(r, c['jaxrod'])} |")
         L.append("")
     L += ["## Notes and caveats", ""] + [f"- {x}" for x in out["notes"]]
     path.write_text("\n".join(L) + "\n")
@@ -487,24 +500,26 @@ def main():
 
 
 NOTES = [
-    "RESULT (2026-12-02, second run of the day, load ~1.4-1.5): jaxrod's default is now RATTLE at Courant 0.45 with "
-    "`substeps=4` (simulate's default at its automatic step since this run), and it is also the matched run: "
-    "26.6x faster than PyElastica on the snap phase (0.069 s vs 1.84 s, v_s error 9.6e-5 vs PyElastica's 1.7e-3) "
-    "and 32.9x on the full ramp (0.277 s vs 9.10 s, error 3.9e-3 vs 4.3e-3). The 30x target is met on the full "
-    "ramp and missed on the snap phase in this run; the first run of the day measured 38.9x / 36.3x for the same "
-    "settings (jaxrod 0.063 / 0.285 s, PyElastica 2.45 / 10.36 s): PyElastica's per-step time moved from 34.2 to "
-    "25.7 us between the two runs on this shared 2-core VM, jaxrod's by 10 %, so the snap-phase ratio is ~30x "
-    "within the machine's noise. The 100x aim is not met. With one RATTLE step per diffrax step (substeps 1, the "
-    "earlier default): 19.6x (0.094 s) / 21.2x (0.429 s). `substeps` = RATTLE steps per diffrax step: the same "
-    "steps (tests/test_rattle.py checks the samples agree to 1e-8, round-off grown by the unstable start), with "
-    "diffrax's per-step work (event, saving, loop carry) done once per 4 steps; a bare `fori_loop` of RATTLE "
-    "steps measured 8.7 us/step against 16.8 us/step through diffrax at substeps 1 (11.1 at 4). Where the ratio "
-    "comes from: RATTLE's step at N = 50 is 1.8e-4 T (0.45 of its stability limit on the highest bending mode, "
-    "4/h^2), 12x PyElastica's 1.5e-5, whose PositionVerlet step is bounded by the stretch/shear modes that an "
-    "inextensible chain does not have; per step RATTLE costs ~11 us at 4 substeps (one bending gradient, two "
-    "SHAKE Newton iterations and one velocity projection, each a tridiagonal solve, plus a quarter of diffrax's "
-    "per-step work) against PyElastica's 26 us. The earlier Tsit5 default needed rtol = atol = 1e-8 to match "
-    "(1.3x / 1.6x in this run).",
+    "RESULT (2026-12-02, third run of the day, load ~1.0-1.25, after RATTLE's forces were taken from its own "
+    "Cartesian state, commit 2b6b829): jaxrod's default (RATTLE at Courant 0.45, `substeps=4`) is the matched run: "
+    "35.9x faster than PyElastica on the snap phase (0.046 s vs 1.65 s, v_s error 4.3e-6 vs PyElastica's 1.7e-3) "
+    "and 40.2x on the full ramp (0.205 s vs 8.24 s, error 4.0e-3 vs 4.3e-3): the 30x target is met on both; the "
+    "100x aim is not. PyElastica's step cost 23.1 us here, the fastest of the day's three runs (34.2 and 25.7 us "
+    "before): at its slower step times the ratios would be larger. At a tighter matched accuracy the ratio grows: "
+    "PyElastica needs dt/2 (3.29 s) for a 1.4e-4 error, against jaxrod's 0.046 s (71.3x; column 'ratio' of the "
+    "PyElastica rows: the fastest jaxrod run at least as accurate as that row). Earlier runs, before the force "
+    "change (same settings): 26.6x / 32.9x (jaxrod 0.069 / 0.277 s) and 38.9x / 36.3x. What changed in jaxrod: "
+    "RATTLE's applied forces now come from its own Cartesian state (link normals from the node differences, "
+    "damping and drag at v_1/2, pads instead of scatter-adds) instead of being re-derived from the angles by "
+    "trigonometry and cumulative sums; a bare loop of RATTLE steps went from 7.6 to 5.7 us/step at N = 50, "
+    "through diffrax at 4 substeps 7.4 us/step (6200 steps in 0.046 s). Where the ratio comes from: RATTLE's step "
+    "at N = 50 is 1.8e-4 T (0.45 of its stability limit on the highest bending mode, 4/h^2), 12x PyElastica's "
+    "1.5e-5, whose PositionVerlet step is bounded by the stretch/shear modes that an inextensible chain does not "
+    "have; per step RATTLE costs ~7.4 us (one bending gradient, two SHAKE Newton iterations and one velocity "
+    "projection, each a ~0.9 us LAPACK tridiagonal solve, plus a quarter of diffrax's per-step work) against "
+    "PyElastica's 23-34 us. `substeps` = RATTLE steps per diffrax step: the same steps (tests/test_rattle.py), "
+    "with diffrax's per-step work done once per 4 steps; with one RATTLE step per diffrax step: 25.0x / 23.9x. "
+    "The earlier Tsit5 default needed rtol = atol = 1e-8 to match (1.6x / 1.7x in this run).",
     "Full ramp caveat: alpha_c is a branch point here, and a symmetric ramp from a symmetric state leaves it only "
     "when round-off seeds the asymmetric mode, so the snap delay (and v_s, since the clamps keep turning) depends on "
     "each integrator's round-off: RATTLE at Courant 0.45, 0.3 and 0.15 gives 26.418, 26.423, 26.416 (26.421 at 0.45 with 4 substeps; converged in "
