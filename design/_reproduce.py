@@ -8,8 +8,10 @@ Dynamic snaps also keep their trajectories in `DIR/traj/*.npz` (for the figures)
 Defaults: the strip of MODEL.md ($L=B=\lambda=1$, $s_0=0.02$), symmetric actuation.
 Statics mesh: $N=200$ ($N=60$ with `quick`); the critical angles converge as $N^{-2}$
 ($\approx 1000^\circ/N^2$). Dynamics (`dynamics_config`): brink snaps with `jr.snap_dynamics`,
-$N=100$, Tsit5 rtol $10^{-6}$, the speed plane on $\Psi_0\in\{30,60,90,120,180\}^\circ\times
-G/L\in\{0.3,\dots,0.7\}$ ($N=60$, rtol $10^{-5}$, a 4 x 3 grid with `quick`).
+$N=100$, jaxrod's default integrator (RATTLE at its automatic step, v_s error 1.7e-5 at
+N = 100 against a converged reference, benchmarks/results/dynamics.md), the speed plane on
+$\Psi_0\in\{30,60,90,120,180\}^\circ\times G/L\in\{0.3,\dots,0.7\}$ ($N=60$, a 4 x 3
+grid with `quick`). A config with `solver="tsit5"` and `rtol` runs adaptive Tsit5 instead.
 """
 
 from __future__ import annotations
@@ -240,17 +242,34 @@ _PET_THICKNESS = (80e-6, 250e-6)
 def dynamics_config(quick):
     """Mesh, tolerance and speed-plane grid of the dynamics sections."""
     if quick:
-        return dict(n=60, rtol=1e-5, psis=(30.0, 60.0, 90.0, 180.0), gaps=(0.3, 0.5, 0.7))
-    return dict(n=100, rtol=1e-6, psis=(30.0, 60.0, 90.0, 120.0, 180.0), gaps=(0.3, 0.4, 0.5, 0.6, 0.7))
+        return dict(n=60, solver="rattle", psis=(30.0, 60.0, 90.0, 180.0), gaps=(0.3, 0.5, 0.7))
+    return dict(n=100, solver="rattle", psis=(30.0, 60.0, 90.0, 120.0, 180.0), gaps=(0.3, 0.4, 0.5, 0.6, 0.7))
+
+
+def _rattle(cfg):
+    return cfg.get("solver", "rattle") == "rattle"
+
+
+def _dyn_tag(cfg):
+    """The solver's part of the cache keys ("rattle", or Tsit5's rtol as before)."""
+    return "rattle" if _rattle(cfg) else f"{cfg['rtol']:g}"
+
+
+def _dyn_words(cfg):
+    """The integrator, in the report's words."""
+    if _rattle(cfg):
+        return "RATTLE, jaxrod's default symplectic integrator, at its default step"
+    return f"Tsit5 rtol = atol = {cfg['rtol']:g}"
 
 
 def _run_kwargs(cfg, window=None):
     import jax.numpy as jnp
 
     w = (0.0, _T1) if window is None else window
-    return dict(solver="tsit5", rtol=jnp.asarray(cfg["rtol"]), atol=jnp.asarray(cfg["rtol"]),
-                t1=jnp.asarray(_T1), stop_at_snap=True, n_frames=_N_FRAMES,
-                frame_window=(jnp.asarray(float(w[0])), jnp.asarray(float(w[1]))))
+    kw = dict(stop_at_snap=True, n_frames=_N_FRAMES, frame_window=(jnp.asarray(float(w[0])), jnp.asarray(float(w[1]))))
+    if _rattle(cfg):  # t1 a Python number: RATTLE samples every (macro) step and sizes max_steps from it
+        return dict(solver="rattle", t1=float(_T1), **kw)
+    return dict(solver="tsit5", rtol=jnp.asarray(cfg["rtol"]), atol=jnp.asarray(cfg["rtol"]), t1=jnp.asarray(_T1), **kw)
 
 
 _TRAJ_FIELDS = ("t", "fold_height", "fold_speed", "bending", "potential", "kinetic", "clamp_work",
@@ -309,7 +328,7 @@ def _vs_record(psi0_deg, gap, cfg):
 
 
 def _vs_key(p, g, cfg):
-    return f"vs/{p:g}/{g:g}/{cfg['n']}/{cfg['rtol']:g}"
+    return f"vs/{p:g}/{g:g}/{cfg['n']}/{_dyn_tag(cfg)}"
 
 
 def _vs(cache, p, g, cfg):
@@ -338,7 +357,7 @@ def _framed_snap(cache, out, p, g, cfg):
         r["kind"] = rec.get("kind")
         return r, _traj_arrays(tr)
 
-    return _cached_traj(out, f"snap/{p:g}/{g:g}/{cfg['n']}/{cfg['rtol']:g}", fn)
+    return _cached_traj(out, f"snap/{p:g}/{g:g}/{cfg['n']}/{_dyn_tag(cfg)}", fn)
 
 
 def _fastest_points(traj, v_s):
@@ -376,13 +395,14 @@ def section_snap_dynamics(cache, out, progress, cfg):
         rec, traj = _framed_snap(cache, out, 30.0, 0.5, cfg)
     if traj is None:
         return title, "jaxrod finds no snap up here.", [("snap up, Psi0 = 30, G/L = 0.5", "snaps", "no snap", "")], rec
-    fast = cache.get(f"fastest/30/0.5/{cfg['n']}/{cfg['rtol']:g}", lambda: _fastest_points(traj, rec["v_s"]))
+    fast = cache.get(f"fastest/30/0.5/{cfg['n']}/{_dyn_tag(cfg)}", lambda: _fastest_points(traj, rec["v_s"]))
     d = os.path.join(out, "fig3_snap")
     plot_snap(traj, d, title=f"brink snap up, Psi0 = 30 deg, G/L = 0.5, N = {cfg['n']}")
     ratio = rec["kinetic_energy_peak"] / rec["bending_energy_before"]
     rows = [("E_k at its peak / E_b before the snap", "bending energy almost entirely traded for kinetic",
              f"{ratio:.2f}", f"E_b before {rec['bending_energy_before']:.1f} B/L, E_k peak "
-             f"{rec['kinetic_energy_peak']:.1f} B/L; energy drift {rec['energy_drift']:.1e}"),
+             f"{rec['kinetic_energy_peak']:.1f} B/L; energy drift {rec['energy_drift']:.1e}"
+             + (" (RATTLE's bounded O(dt^2) energy error)" if _rattle(cfg) else "")),
             ("typical bending energy of the equilibria", "~100 B/L", f"{rec['bending_energy_before']:.1f} B/L",
              "critical (pre-snap) state, Psi0 = 30 deg, G/L = 0.5"),
             ("mean speed along the strip at its largest", "~10 v*", f"{fast['mean_speed_max']:.1f} v*",
@@ -394,7 +414,7 @@ def section_snap_dynamics(cache, out, progress, cfg):
              "first is set by the nudge (the mirror image is an equally valid snap)")]
     text = (f"`jr.snap_dynamics(scene, 'up', kind='brink', nudge={_NUDGE})`: the critical state of the "
             "quasi-static path, clamps 1e-3 rad past alpha_c_up, nudged along the unstable mode "
-            f"(kind: {rec.get('kind')}); Tsit5 rtol = atol = {cfg['rtol']:g}, N = {cfg['n']}, no dissipation. "
+            f"(kind: {rec.get('kind')}); {_dyn_words(cfg)}, N = {cfg['n']}, no dissipation. "
             f"v_s = {rec['v_s']:.3f} v* at t = {rec['t_peak']:.3f} T. The paper's Fig. 3 is a DER simulation "
             "as the clamps turn; here the clamps are held just past alpha_c (the `ramp` scene turns them).\n\n"
             "![chronophotography](fig3_snap/chrono.png) ![speed map](fig3_snap/speed_map.png) "
@@ -418,7 +438,7 @@ def section_speed_plane(cache, out, progress, cfg):
             f"{recs[(p, g)]['v_s']:.2f}" if recs[(p, g)].get("snaps") else "no snap" for g in cfg["gaps"]) + " |")
     paper = [f"{_PAPER_FIT[0]} +- 1.33", f"{_PAPER_FIT[1]} +- 2.57", f"{_PAPER_FIT[2]} +- 0.26"]
     names = ["v_m (G/L = 0, Psi0 = 0 intercept)", "a (slope in G/L)", "b (slope in Psi0, rad)"]
-    data = {"points": {f"{p:g}/{g:g}": r for (p, g), r in recs.items()}, "n": cfg["n"], "rtol": cfg["rtol"]}
+    data = {"points": {f"{p:g}/{g:g}": r for (p, g), r in recs.items()}, "n": cfg["n"], "solver": _dyn_words(cfg)}
     if nsnap < 4:
         rows = [(f"v_s/v* = v_m - a G/L - b Psi0: {nm}", pv, "n/a (fewer than 4 snapping points)", "")
                 for nm, pv in zip(names, paper)]
@@ -430,7 +450,7 @@ def section_speed_plane(cache, out, progress, cfg):
             for k, (nm, pv, c, e) in enumerate(zip(names, paper, coef, err))]
     data["fit"] = dict(v_m=coef[0], a=coef[1], b=coef[2], stderr=err, rms=rms, points=nsnap)
     text = (f"Peak fold speed v_s / v* of the brink snap up (as in the section above) at every point of the grid "
-            f"(N = {cfg['n']}, Tsit5 rtol = {cfg['rtol']:g}); \"no snap\": the quasi-static up path does not lose "
+            f"(N = {cfg['n']}, {_dyn_words(cfg)}); \"no snap\": the quasi-static up path does not lose "
             "stability there (past the termination gap). The paper's plane is a fit to experiments on PET "
             "strips, jaxrod's to the undamped planar model; nothing is tuned.\n\n" + "\n".join(table)
             + "\n\n![speed plane](speed_plane.png) (points and jaxrod's plane: solid; the paper's plane: dotted)")
@@ -523,7 +543,7 @@ def section_asymmetric(cache, out, progress, cfg):
 
     title = "Asymmetric actuation (Fig. 4)"
     p, g, rate, n = _ASYM["psi0"], _ASYM["gap"], _ASYM["rate"], cfg["n"]
-    key = f"asym/{p:g}/{g:g}/{rate:g}/{n}/{cfg['rtol']:g}"
+    key = f"asym/{p:g}/{g:g}/{rate:g}/{n}/{_dyn_tag(cfg)}"
     scene = _scene(p, g, n, 0.02)
     lead = 0.15  # the snap frames start this long (T) before the fold crosses y = 0
 
@@ -594,7 +614,7 @@ def run(out, quick=False, progress=True):
                  (section_snap_dynamics, section_speed_plane, section_folded_unfolded, section_asymmetric)]
     md = ["# jaxrod reproduces Marzin et al., \"Augmented snap-through instability of folded strips\"", "",
           f"jaxrod {jr.__version__}, {datetime.date.today().isoformat()}, {platform.node()}, "
-          f"jax {jax.__version__}, statics N = {n}, dynamics N = {cfg['n']} (Tsit5 rtol = atol = {cfg['rtol']:g})"
+          f"jax {jax.__version__}, statics N = {n}, dynamics N = {cfg['n']} with {_dyn_words(cfg)}"
           f"{' (quick)' if quick else ''}. Units L = B = lambda = 1, s0 = 0.02 L, angles in degrees; "
           "the paper's numbers are experiments on PET strips unless noted, jaxrod's the planar Kirchhoff model "
           "(nothing fitted to the paper).", "", "| quantity | paper | jaxrod | note |", "|---|---|---|---|"]
