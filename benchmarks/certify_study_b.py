@@ -78,7 +78,9 @@ def main():
          f"Design found (benchmarks/results/design.json): Psi0 = {args.psi0:.3f} deg, G/L = {args.gap:.5f}, "
          f"v_s = {v_design:.4f} v*.", "",
          f"Grid maximum: Psi0 = {best['psi0_deg']:.2f} deg (0.25-deg grid), G/L = 0.30, v_s = {best['v_s']:.4f} v*; "
-         f"the design is {100 * out['design_below_grid_max']:.3f} % below it.", "",
+         + (f"the design is {100 * out['design_below_grid_max']:.3f} % below it." if out["design_below_grid_max"] > 0
+          else f"the design is at or above it ({-100 * out['design_below_grid_max']:.3f} % above: it lies between "
+               "grid points)."), "",
          "Largest v_s on the 2-deg Psi0 grid at larger gaps (v_s falls with G/L, so the bound is active): "
          + ", ".join(f"G/L = {g:.2f}: {v:.4f}" for g, v in coarse_best_other_gaps.items()) + ".", "",
          "| Psi0 (deg) | " + " | ".join(f"G/L = {g:.2f}" for g in gaps) + " |",

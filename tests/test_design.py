@@ -130,6 +130,49 @@ def test_result_save_and_load_roundtrip(multistart, tmp_path):
     assert back.names == res.best.names
 
 
+def test_golden_max_finds_the_maximum_and_keeps_a_better_start():
+    from design._studies import golden_max
+
+    f = lambda x: -(x - 26.5) ** 2 + 1e-4 * math.sin(40 * x)  # noqa: E731  (a max with small wiggles)
+    x, v, evals = golden_max(f, 10.0, 60.0, xtol=0.05)
+    assert abs(x - 26.5) < 0.05 and v == pytest.approx(f(x))
+    assert evals == 2 + math.ceil(math.log(0.05 / 50.0) / math.log((math.sqrt(5) - 1) / 2))
+    # a start better than every point the search visits is kept; non-finite values lose
+    x, v, _ = golden_max(lambda x: float("nan") if x > 30 else -abs(x - 11.0), 10.0, 40.0, x0=11.0, f0=0.0)
+    assert (x, v) == (11.0, 0.0)
+
+
+def test_psi0_polish_reaches_the_scanned_maximum_on_the_compiled_problem(multistart):
+    """`_polish_psi0` (study (b)'s last step) maximizes the first term's value over Psi0 at the
+    design's gap; here the fold height of the down state, cheap: checked against a scan."""
+    from design._optimize import _linearize_batch
+    from design._studies import _polish_psi0
+
+    _, res = multistart
+    b = res.best
+    problem = ds.Problem(TERMS, PARAM, N)
+    p0 = b.psi0_deg
+    d, rec = _polish_psi0(b, TERMS, PARAM, N, window=10.0, xtol=0.02)
+    assert rec["psi0_before"] == p0 and rec["v_s_after"] >= rec["v_s_before"]
+    assert rec["evaluations"] >= 10 and abs(d.psi0_deg - rec["psi0_after"]) < 1e-12
+    assert d.gap == pytest.approx(b.gap, rel=1e-12)  # only Psi0 moves
+
+    def value(p):
+        z = np.asarray(b.z).copy()
+        z[0] = float(PARAM.from_values(psi0_deg=p)[0])
+        return float(np.asarray(_linearize_batch(problem, jnp.asarray(z)[None], 1)[2])[0, 0])
+
+    scan = [value(p) for p in np.linspace(p0 - 10.0, p0 + 10.0, 41)]
+    slope = max(abs(a - c) for a, c in zip(scan, scan[1:])) / 0.5
+    assert rec["v_s_after"] >= max(scan) - 0.02 * slope, (rec, max(scan))
+    assert rec["v_s_after"] > rec["v_s_before"] + 1e-6  # the fold-target design is not a maximum
+    # the returned design is consistent: its values and achieved are those of its z
+    r, _, v = problem.linearize(d.z)
+    np.testing.assert_allclose(np.asarray(v), np.asarray(d.achieved), rtol=1e-10)
+    np.testing.assert_allclose(np.asarray(PARAM.values(d.z)), np.asarray(d.values), rtol=1e-12)
+    assert float(d.loss) == pytest.approx(0.5 * float(jnp.sum(r**2)), rel=1e-10)
+
+
 def test_unreachable_target_reports_best_and_not_reached():
     # the down state's fold height cannot exceed 0 (it would be the up state)
     res = ds.optimize((ds.FoldHeight(+0.3, state="down", tol=1e-4),), PARAM, n=N, max_iter=8, progress=False)
