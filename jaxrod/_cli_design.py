@@ -236,5 +236,5 @@ def register(sub):
                                    "An interrupted run resumes from DIR/cache.json.",
                        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     r.add_argument("--out", metavar="DIR", default="jaxrod-reproduce", help="output directory")
-    r.add_argument("--quick", action="store_true", help="coarser mesh and sweep (< 3 min on 2 cores)")
+    r.add_argument("--quick", action="store_true", help="coarser mesh and sweep (about 1 min on 2 cores; the default about 2 min)")
     r.set_defaults(handler=_cmd_reproduce)
