@@ -8,8 +8,9 @@ Run from the repository root:
 
 What is measured (scene: s0 = 0.02 L, uniform mesh, n = 100):
 
-* `jr.termination_gap(psi0, tol=1e-5)`: gap_up, gap_down (scan + bisection on
-  `snap_angles`), their brackets, what ends each path, the cusp gap of a fold path and
+* `jr.termination_gap(psi0, tol=1e-5)`: gap_up, gap_down (the exact end of each path where
+  located, see `gap_source_*`), the snap criterion's gap (scan + bisection on `snap_angles`,
+  `gap_criterion_*`) and its bracket, what ends each path, the cusp gap of a fold path and
   dG_c/dPsi0 (implicit differentiation), the same end by two-parameter continuation of the
   fold in (G, alpha) (`jr.continue_critical`), number of `snap_angles` calls, wall time
   (compilation included for the first Psi0, reported separately);
@@ -38,7 +39,6 @@ import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
@@ -100,30 +100,35 @@ def main():
         rec["refinement"] = refinement_timing()
         path.write_text(json.dumps(rec, indent=1))
     lines = ["# Termination gap G*(Psi0), n = 100, s0 = 0.02 L", "",
-             "| Psi0 (deg) | G*_up | ends by | start-state fold G_f (up) | dG_f/dPsi0 (1/rad) | G*_down | ends by "
-             "| cusp G_c (down) | dG_c/dPsi0 (1/rad) | fold curve's turn (continuation, down) | its points "
-             "| snap_angles calls | wall (s) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| Psi0 (deg) | G*_up | from | snap criterion (up) | ends by | dG*_up/dPsi0 (1/rad) | G*_down | from "
+             "| snap criterion (down) | ends by | dG*_down/dPsi0 (1/rad) | fold curve's turn, Hermite (down) "
+             "| its points | snap_angles calls | wall (s) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
     def fmt(x, f="{:.5f}"):
         return "-" if x is None else f.format(x)
 
     for key, row in rec["rows"].items():
-        lines.append(f"| {key} | {fmt(row['gap_up'])} | {row['reason_up']} | {fmt(row.get('state_fold_gap_up'), '{:.6f}')} | "
-                     f"{fmt(row.get('dstate_fold_gap_dpsi0_up'), '{:.4f}')} | {fmt(row['gap_down'])} | "
-                     f"{row['reason_down']} | {fmt(row['cusp_gap_down'])} | {fmt(row['dcusp_gap_dpsi0_down'], '{:.4f}')} | "
-                     f"{fmt(row.get('curve_end_gap_down'))} | {row.get('curve_points_down', 0) or '-'} | "
+        lines.append(f"| {key} | {fmt(row['gap_up'], '{:.6f}')} | {row.get('gap_source_up', '-')} | "
+                     f"{fmt(row.get('gap_criterion_up'))} | {row['reason_up']} | "
+                     f"{fmt(row.get('dstate_fold_gap_dpsi0_up'), '{:.4f}')} | {fmt(row['gap_down'], '{:.6f}')} | "
+                     f"{row.get('gap_source_down', '-')} | {fmt(row.get('gap_criterion_down'))} | "
+                     f"{row['reason_down']} | {fmt(row['dcusp_gap_dpsi0_down'], '{:.4f}')} | "
+                     f"{fmt(row.get('curve_end_gap_down'), '{:.6f}')} | {row.get('curve_points_down', 0) or '-'} | "
                      f"{row['evaluations']} | {row['wall_s']:.1f} |")
     ref = rec["refinement"]
-    lines += ["", "G*_up (bisection midpoint, bracket 1e-5) ends where the snap-up path's start, the down state at "
-              "alpha = 0, stops existing; G_f is that end solved exactly (the extended system of `critical_point` "
-              "with the gap as parameter, a fold in G at every Psi0 here, inside the bracket each time) and "
-              "dG_f/dPsi0 its implicit derivative (tests/test_termination.py checks it against central "
-              "differences). G_c is the cusp where the snap-down path's fold pair meets (G_c > G*_down: just "
-              "below G_c the jump is too small to count as a snap). The fold curve's turn is the same end reached by "
-              "two-parameter continuation (`jr.continue_critical`): the snap-down fold of the largest grid gap that "
-              "snaps, followed in (G, alpha) until G turns back (Hermite estimate of the turn; the cusp solved from "
-              "the curve's last point agrees with G_c to 1e-9)."]
+    lines += ["", "G* (`gap_*`) is the exact end of each path where it was located (`gap_source_*`): "
+              "'continuation_cusp', the cusp where the snap-down path's fold pair meets, reached by two-parameter "
+              "continuation (`jr.continue_critical`: the snap-down fold of the largest grid gap that snaps, "
+              "followed in (G, alpha) until G turns back) and solved from the curve's last point (it agrees with "
+              "the direct cusp solve to 1e-8; the Hermite estimate of the turn is the column 'fold curve's turn'); "
+              "'state_fold', the fold in G of the snap-up path's start state, the down state at alpha = 0 (the "
+              "extended system of `critical_point` with the gap as parameter, inside the bisection bracket each "
+              "time); 'bisection' where neither applies. Their derivatives in Psi0 are implicit "
+              "(tests/test_termination.py checks them against central differences). 'snap criterion': the "
+              "bisection midpoint (bracket 1e-5) of `snap_angles`' own yes/no answer, which the phase diagram "
+              "uses: it stops ~1e-3 below a cusp, where the jump falls below the snap criterion's distance, and "
+              "agrees with G_f to the bracket where the start state is lost."]
     lines += ["", "Side by side at Psi0 = 60 deg, G/L = 0.5 (steady, median of 5):", "",
               "| snap_angles (s) | extended-system refinement, both paths (s) | ratio |", "|---|---|---|",
               f"| {ref['snap_angles_s']:.3f} | {ref['refinement_both_paths_s']:.3f} | {ref['ratio']:.3f} |", "",

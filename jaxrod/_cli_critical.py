@@ -20,9 +20,12 @@ def register(sub):
     p = sub.add_parser(
         "termination-gap", help="gap G*/L beyond which each path stops snapping",
         description="Scan the gap G/L with snap-angles and bisect where each path (snap up, snap down)\n"
-                    "stops snapping, to --tol in G/L. Reports gap_up, gap_down, the bracket, what ends\n"
-                    "each path (cusp, supercritical, start_state_lost, ...) and the instability kind\n"
-                    "just below G*. A flat strip (--psi0 180) never stops snapping (gap 1).",
+                    "stops snapping by its criterion, to --tol in G/L (gap_criterion_*, the bracket), then\n"
+                    "locate what ends each path exactly: the cusp of the snap-down fold pair (two-parameter\n"
+                    "continuation of the fold in (G, alpha)) or the fold in G of the path's start state.\n"
+                    "Reports gap_up, gap_down (the exact end where located: gap_source_*), the reason\n"
+                    "(cusp, supercritical, start_state_lost, ...) and the instability kind just below G*.\n"
+                    "A flat strip (--psi0 180) never stops snapping (gap 1).",
         epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--psi0", type=_number, default=60.0, metavar="DEG",
                    help="fold angle Psi0 in (0, 180] degrees (default %(default)g)")
@@ -54,6 +57,9 @@ def _cmd_termination_gap(args):
     else:
         for name in ("up", "down"):
             g = rec[f"gap_{name}"]
+            crit = rec.get(f"gap_criterion_{name}")
+            src = rec.get(f"gap_source_{name}", "none")
+            extra = (f"; snap criterion {crit:.6f}" if src not in ("bisection", "none") and crit is not None else "")
             print(f"snap {name:<4}: " + ("never snaps" if g is None else
-                  f"G*/L = {g:.6f} ({rec[f'reason_{name}']}; last snap: {rec[f'kind_{name}']})"))
+                  f"G*/L = {g:.6f} ({rec[f'reason_{name}']}, from {src}{extra}; last snap: {rec[f'kind_{name}']})"))
     return EXIT_OK

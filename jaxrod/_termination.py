@@ -1,22 +1,30 @@
 r"""Termination gap $G^\ast(\Psi_0)$: the gap beyond which a snapping path no longer snaps.
 
-For each path (snap up, snap down) [`jaxrod.snap_angles`][] answers "does it snap at this
-gap". $G^\ast$ is located by
+MODEL.md: beyond $G^\ast$ "the fold height varies continuously with alpha, with no loss of
+stability". Each path (snap up, snap down) is located in two stages:
 
-1. a scan over a grid of gaps $G/L\in(0,1)$ (default 0.05, 0.10, ..., 0.95, 0.99):
-   the bracket is the largest grid gap that snaps and the next grid gap, which does not;
-2. bisection of that bracket on the same yes/no answer down to `tol` in $G/L$
-   (default $10^{-5}$, i.e. a bracket $[G^\ast_-, G^\ast_+]$ of that width; $G^\ast$ is its midpoint).
+1. the snap criterion of [`jaxrod.snap_angles`][] ("does it snap at this gap") on a grid
+   of gaps $G/L\in(0,1)$ (default 0.05, 0.10, ..., 0.95, 0.99): the bracket is the largest
+   grid gap that snaps and the next one, which does not; then bisection of that bracket on
+   the same yes/no answer down to `tol` in $G/L$ (default $10^{-5}$): `gap_criterion_*`,
+   the midpoint of $[G^\ast_-, G^\ast_+]$ (`bracket_*`), consistent with `snap_angles` and
+   the phase diagram by construction (`tests/test_termination.py` checks it just below and
+   just above);
+2. the exact end of what ends the path, from the state at $G^\ast_-$ (below): the cusp of
+   the snap-down fold pair, reached by two-parameter continuation of the fold in (G, alpha)
+   ([`jaxrod.continue_critical`][]) and solved there, or the fold in G of the path's start
+   state. Where it is located, it is the reported `gap_*` (`gap_source_*`:
+   "continuation_cusp", "cusp" or "state_fold"); otherwise `gap_*` is the bisection value
+   ("bisection").
 
-This is the same criterion that the phase diagram of snap angles uses, so the reported
-$G^\ast$ is consistent with `snap_angles` by construction (`tests/test_termination.py`
-checks it just below and just above). `snap_angles` counts a loss of stability as a snap
-when the relaxed landing state lies more than `jaxrod._snap.JUMP_DISTANCE` ($L^2$ norm of
-the angle field) away; otherwise it follows the new stable branch (a supercritical branch
-point) and looks for the next loss of stability. Near $G^\ast$ the jump shrinks
-continuously (the fold pair merging at a cusp, or the landing state joining the critical
-one), so this criterion's $G^\ast$ is where the jump reaches that size; the reported
-`jump_*` (the fold height change at $G^\ast_-$) says how large the snap still is there.
+The two differ where the jump shrinks continuously to zero (a cusp): `snap_angles` counts
+a loss of stability as a snap only when the relaxed landing state lies more than
+`jaxrod._snap.JUMP_DISTANCE` ($L^2$ norm of the angle field) away (otherwise it follows
+the new stable branch, as at a supercritical branch point), so its criterion stops ~1e-3
+in $G/L$ below the cusp, where the fold pair, and with it every loss of stability on the
+path, ends (measured at n = 100: 0.63760 vs 0.63852 at 30 deg). The reported `jump_*`
+(the fold height change at $G^\ast_-$) says how large the snap still is there. Where the
+start state is lost, the two agree to the bisection tolerance.
 
 What ends each path (`reason_*`):
 - `"cusp"`: just below $G^\ast$ the path loses stability at a fold and the jump is small
@@ -33,12 +41,12 @@ What ends each path (`reason_*`):
   `snap_angles` would stop resolving it;
 - `"never_snaps"`: no grid gap snaps ($G^\ast$ is NaN).
 
-For a path that ends at a cusp the end is also located exactly, independent of the jump
+For a path that ends at a cusp the end is located exactly, independent of the jump
 criterion: [`jaxrod.cusp_point`][] solves the fold system augmented by the gap and the
 vanishing cubic coefficient $\tilde{\mathcal L}^{(3)}[v,v,v]=0$, from the fold at $G^\ast_-$,
-giving the cusp gap $G_c\ (\ge G^\ast)$ and $dG_c/d\Psi_0$ by implicit differentiation
-(`cusp_gap_*`, `dcusp_gap_dpsi0_*`). Between $G^\ast$ and $G_c$ the fold pair still exists
-but its jump is below the snap criterion. The same end is also reached by two-parameter
+giving the cusp gap $G_c$ (above `gap_criterion_*`) and $dG_c/d\Psi_0$ by implicit
+differentiation (`cusp_gap_*`, `dcusp_gap_dpsi0_*`). Between `gap_criterion_*` and $G_c$
+the fold pair still exists but its jump is below the snap criterion. The same end is also reached by two-parameter
 continuation, as a demanding user would compute it: the fold of the largest grid gap that
 snaps is followed in (G, alpha) by [`jaxrod.continue_critical`][] until G turns back, which
 for a fold curve is exactly the cusp (`curve_end_gap_*`, Hermite estimate of the turn;
@@ -51,7 +59,8 @@ the state at $G^\ast_-$ and its lowest symmetric / asymmetric mode, and the one 
 bracket is kept (`state_end_kind_*`): `state_fold_gap_*` $=G_f$ and
 `dstate_fold_gap_dpsi0_*` $=dG_f/d\Psi_0$ by implicit differentiation. There
 $G^\ast=G_f$ exactly (the path snaps up to where its start exists). The bisection gap
-$G^\ast$ itself ends a discrete search and has no derivative.
+`gap_criterion_*` ends a discrete search and has no derivative; the exact ends have one
+(`dcusp_gap_dpsi0_*`, `dstate_fold_gap_dpsi0_*`).
 """
 
 from __future__ import annotations
@@ -75,7 +84,8 @@ SMALL_JUMP = 0.15  # |fold height change| / L below which the end is "continuous
 
 
 class TerminationGap(NamedTuple):
-    r"""`gap_up`, `gap_down` ($G^\ast/L$; 1.0 where the path never stops snapping, NaN where it
+    r"""`gap_up`, `gap_down` ($G^\ast/L$: the exact end where located, see `gap_source_*`,
+    else the snap criterion's bisection value `gap_criterion_*`; 1.0 where the path never stops snapping, NaN where it
     never snaps), `bracket_up`/`bracket_down` ($(G^\ast_-, G^\ast_+)$), `reason_up`/
     `reason_down` (see the module docstring), `kind_up`/`kind_down` (instability kind at
     $G^\ast_-$: "fold", "branch_point" or "none"), `alpha_c_up`/`alpha_c_down` (rad, at
@@ -91,7 +101,9 @@ class TerminationGap(NamedTuple):
     ([`jaxrod.continue_critical`][], from the largest grid gap that snaps):
     `curve_end_reason_*` ("turn" where G turns back: the cusp), `curve_points_*`,
     `curve_end_gap_*` (the turn, Hermite estimate) and `curve_cusp_gap_*` (the cusp solved
-    from the last point before the turn)."""
+    from the last point before the turn). `gap_criterion_*`: the bisection midpoint of the
+    snap criterion; `gap_source_*`: where `gap_*` comes from ("continuation_cusp", "cusp",
+    "state_fold", "bisection"; "none" without a search)."""
 
     psi0_deg: float
     gap_up: float
@@ -125,6 +137,10 @@ class TerminationGap(NamedTuple):
     curve_points_down: int = 0
     curve_end_reason_up: str = "none"
     curve_end_reason_down: str = "none"
+    gap_criterion_up: float = math.nan
+    gap_criterion_down: float = math.nan
+    gap_source_up: str = "none"
+    gap_source_down: str = "none"
 
     def to_dict(self):
         def clean(x):
@@ -182,7 +198,7 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
         # G/L = 0.95 into the other state with a jump > 2x the critical fold height)
         return TerminationGap(180.0, 1.0, 1.0, (math.nan, math.nan), (math.nan, math.nan),
                               "flat_strip_never_stops", "flat_strip_never_stops", "branch_point", "branch_point",
-                              math.nan, math.nan, math.nan, math.nan, 0)
+                              math.nan, math.nan, math.nan, math.nan, 0, gap_criterion_up=1.0, gap_criterion_down=1.0)
     psi = jnp.asarray(math.radians(float(psi0_deg)))
     count = [0]
     bar = None
@@ -245,6 +261,8 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
             results[name].update(_start_fold(base, psi, lo, hi, "down" if name == "up" else "up"))
     if bar is not None:
         bar.close()
+    for r in results.values():
+        _exact_end(r)
     u, d = results["up"], results["down"]
     nan = math.nan
     return TerminationGap(float(psi0_deg), u["gap"], d["gap"], u["bracket"], d["bracket"], u["reason"], d["reason"],
@@ -256,7 +274,30 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
                           u.get("curve_end_gap", nan), d.get("curve_end_gap", nan),
                           u.get("curve_cusp_gap", nan), d.get("curve_cusp_gap", nan),
                           u.get("curve_points", 0), d.get("curve_points", 0),
-                          u.get("curve_end_reason", "none"), d.get("curve_end_reason", "none"))
+                          u.get("curve_end_reason", "none"), d.get("curve_end_reason", "none"),
+                          u["gap_criterion"], d["gap_criterion"], u["gap_source"], d["gap_source"])
+
+
+def _exact_end(r):
+    """Report as `gap` the exact end of the path where it was located, keeping the snap
+    criterion's bisection midpoint as `gap_criterion`: a cusp end is where the fold curve,
+    continued in (G, alpha), turns (`curve_cusp_gap`; the direct cusp solve `cusp` if the
+    continuation did not reach it); a lost start state is its fold in G (`state_fold`)."""
+    r["gap_criterion"] = r["gap"]
+    r["gap_source"] = "bisection" if r["reason"] in ("cusp", "supercritical", "snap_vanishes",
+                                                     "start_state_lost") else "none"
+    if r["reason"] == "cusp":
+        lo = r["bracket"][0]
+        cands = [("cusp", "cusp")]
+        if r.get("curve_end_reason") == "turn":
+            cands.insert(0, ("curve_cusp_gap", "continuation_cusp"))
+        for key, src in cands:
+            g = r.get(key, math.nan)
+            if math.isfinite(g) and lo - 1e-6 <= g < 1.0:
+                r["gap"], r["gap_source"] = g, src
+                break
+    elif r["reason"] == "start_state_lost" and math.isfinite(r.get("state_fold", math.nan)):
+        r["gap"], r["gap_source"] = r["state_fold"], "state_fold"
 
 
 @eqx.filter_jit
