@@ -162,18 +162,30 @@ def main():
             f"{info['cpus']} cores; wall times are upper bounds. Total {info['total_s'] / 60:.1f} min.", "",
             "Target (one snap at N = 100, v_s within 1 % of converged, <= 1 s after compile): " + verdict, ""]
     (RESULTS / "dynamics.md").write_text("\n".join(head + lines) + "\n")
+    plot_trade(rows)
+
+
+def plot_trade(rows):
+    """The speed/accuracy trade: one colour per solver, one marker per N (every series)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(5, 4))
-    for (n, s), mk in zip(sorted({(r["n"], r["solver"]) for r in rows}), "osd^v<>p*h"):
-        rr = [r for r in rows if r["n"] == n and r["solver"] == s]
-        ax.loglog([r["wall_s"] for r in rr], [max(r["rel_err"], 1e-16) for r in rr], mk + "-", label=f"{s}, N={n}")
+    solvers = sorted({r["solver"] for r in rows})
+    ns = sorted({r["n"] for r in rows})
+    colours = {s: f"C{i % 10}" for i, s in enumerate(solvers)}
+    markers = {n: "os^D*"[i % 5] for i, n in enumerate(ns)}
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    for n in ns:
+        for s in solvers:
+            rr = sorted((r for r in rows if r["n"] == n and r["solver"] == s), key=lambda r: r["wall_s"])
+            if rr:
+                ax.loglog([r["wall_s"] for r in rr], [max(r["rel_err"], 1e-16) for r in rr], "-",
+                          marker=markers[n], color=colours[s], label=f"{s}, N={n}")
     ax.set_xlabel("wall time after compile (s)")
     ax.set_ylabel("|v_s - v_ref| / v_ref")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=6, ncol=2)
     fig.tight_layout()
     fig.savefig(RESULTS / "dynamics.png", dpi=120)
 
