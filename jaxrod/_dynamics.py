@@ -156,11 +156,18 @@ def inverse_node_mass(d):
     return jnp.concatenate([jnp.zeros(1, m.dtype), 1.0 / m[1:-1], jnp.zeros(1, m.dtype)])
 
 
-def node_forces(t, theta, omega, scene, protocol, dissipation, d):
-    r"""The applied node forces $\mathbf f_k$ (N+1, 2) of the module docstring (bending pairs,
-    hinge viscosity, gravity, damping, drag; no tensions), with what the tension solve and
-    the clamp power need: `(f, x, v, d, (gL, gR, rL, rR))`, where `d` has the clamp angles
-    at time t, `x, v` the node positions and velocities, `gL = dE_b/dalpha_L` etc."""
+def link_pairs(p):
+    """Node sums of per-link forces `p` (N, 2): +p_i on node i+1, -p_i on node i, (N+1, 2).
+    Pads rather than scatter-adds (XLA:CPU fuses pads; its scatters are loops of their own)."""
+    return jnp.pad(p, ((1, 0), (0, 0))) - jnp.pad(p, ((0, 1), (0, 0)))
+
+
+def applied_forces(t, theta, omega, nn, v, scene, protocol, dissipation, d):
+    r"""The applied node forces $\mathbf f_k$ (N+1, 2) of the module docstring (bending pairs
+    $\pm(Q_i/h_i)\mathbf n_i$, hinge viscosity, gravity, damping, drag; no tensions), given the
+    link normals `nn` (N, 2) and the node velocities `v` (N+1, 2) that the damping and drag
+    act on. Returns `(f, d, (gL, gR, rL, rR))`, `d` with the clamp angles at time t,
+    `gL = dE_b/dalpha_L` etc."""
     aL, aR, rL, rR = protocol.angles(t)
     d = d._replace(theta_left=jnp.asarray(aL, theta.dtype), theta_right=-jnp.asarray(aR, theta.dtype))
     gE, gL, gR = _bending_grads(theta, d.theta_left, -d.theta_right, scene, d)
@@ -171,18 +178,25 @@ def node_forces(t, theta, omega, scene, protocol, dissipation, d):
     phidot = jnp.diff(full_rate)
     tau = eta * phidot / d.ell  # (N+1,) hinge viscous moments
     Q = Q + (tau[1:] - tau[:-1])
-    x, v = kinematics(theta, omega, d)
-    nn = jnp.stack([-jnp.sin(theta), jnp.cos(theta)], -1)
     m = d.node_mass
-    pair = (Q / d.h)[:, None] * nn
-    f = jnp.zeros_like(x).at[1:].add(pair).at[:-1].add(-pair)
+    f = link_pairs((Q / d.h)[:, None] * nn)
     lam = scene.strip.line_density
     if scene.gravity is not None:
         f = f.at[:, 1].add(-m * scene.gravity.g)
     f = f - dissipation.damping * m[:, None] * v
     speed = safe_norm(v)
     f = f - dissipation.drag * (m / lam)[:, None] * speed[:, None] * v
-    return f, x, v, d, (gL, gR, rL, rR)
+    return f, d, (gL, gR, rL, rR)
+
+
+def node_forces(t, theta, omega, scene, protocol, dissipation, d):
+    r"""`applied_forces` from the angles, with what the tension solve and the clamp power
+    need: `(f, x, v, d, (gL, gR, rL, rR))`, `x, v` the node positions and velocities
+    (`kinematics`), the normals $\mathbf n_i=(-\sin\theta_i,\cos\theta_i)$."""
+    x, v = kinematics(theta, omega, d)
+    nn = jnp.stack([-jnp.sin(theta), jnp.cos(theta)], -1)
+    f, d, g = applied_forces(t, theta, omega, nn, v, scene, protocol, dissipation, d)
+    return f, x, v, d, g
 
 
 def accelerations(t, y, scene, protocol, dissipation, baumgarte, d=None, with_work=False):

@@ -45,7 +45,7 @@ import diffrax as dfx
 import jax.numpy as jnp
 from jax import lax
 
-from ._dynamics import _bending_grads, inverse_node_mass, kinematics, safe_norm
+from ._dynamics import applied_forces, inverse_node_mass, kinematics, link_pairs
 
 
 def _tri(lower, diag, upper, rhs):
@@ -54,35 +54,19 @@ def _tri(lower, diag, upper, rhs):
 
 def _spread(mu, dx):
     """G^T mu: link i pulls node i+1 by +mu_i dx_i and node i by -mu_i dx_i, (N+1, 2)."""
-    return _pair(mu[:, None] * dx)
-
-
-def _pair(p):
-    """Node sums of link forces: +p_i on node i+1, -p_i on node i, (N+1, 2). Pads rather
-    than scatter-adds (XLA:CPU fuses pads; its scatters are loops of their own)."""
-    return jnp.pad(p, ((1, 0), (0, 0))) - jnp.pad(p, ((0, 1), (0, 0)))
+    return link_pairs(mu[:, None] * dx)
 
 
 def rattle_forces(t, theta, omega, x, v, args):
-    r"""`jaxrod._dynamics.node_forces` from RATTLE's own Cartesian state: the same applied
-    forces (bending pairs $\pm(Q_i/h_i)\mathbf n_i$, hinge viscosity, gravity, damping,
-    drag), with $\mathbf n_i=(-\Delta y_i,\Delta x_i)/h_i$ from the links and the damping and
-    drag at the given node velocities `v`, instead of re-deriving both from $(\theta,\dot\theta)$
-    by trigonometry and cumulative sums (25 % of a step at N = 50). Returns `(f, clamp power)`."""
+    r"""`jaxrod._dynamics.applied_forces` from RATTLE's own Cartesian state: the normals
+    $\mathbf n_i=(-\Delta y_i,\Delta x_i)/h_i$ from the links and the damping and drag at the
+    given node velocities `v`, instead of re-deriving both from $(\theta,\dot\theta)$ by
+    trigonometry and cumulative sums (`node_forces`; 25 % of a step at N = 50). Returns
+    `(f, clamp power)`."""
     scene, protocol, dissipation, _, d = args
-    aL, aR, rL, rR = protocol.angles(t)
-    gE, gL, gR = _bending_grads(theta, jnp.asarray(aL, theta.dtype), jnp.asarray(aR, theta.dtype), scene, d)
-    full_rate = jnp.concatenate([rL[None], omega, -rR[None]])
-    tau = dissipation.viscosity * jnp.diff(full_rate) / d.ell  # (N+1,) hinge viscous moments
-    Q = -gE + (tau[1:] - tau[:-1])
     dx = jnp.diff(x, axis=0)
     nn = jnp.stack([-dx[:, 1], dx[:, 0]], -1) / d.h[:, None]
-    f = _pair((Q / d.h)[:, None] * nn)
-    m = d.node_mass
-    if scene.gravity is not None:
-        f = f.at[:, 1].add(-m * scene.gravity.g)
-    f = f - dissipation.damping * m[:, None] * v
-    f = f - dissipation.drag * (m / scene.strip.line_density)[:, None] * safe_norm(v)[:, None] * v
+    f, _, (gL, gR, rL, rR) = applied_forces(t, theta, omega, nn, v, scene, protocol, dissipation, d)
     return f, gL * rL + gR * rR
 
 
