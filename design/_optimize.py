@@ -96,6 +96,12 @@ def _linearize_batch(problem, z, batch_size=None):
     return jax.lax.map(problem.linearize, z, batch_size=batch_size)
 
 
+def auto_batch_size():
+    """`batch_size="auto"`: 1 (one start after the other) on the CPU backend, where a large
+    `vmap` is slower and can deadlock XLA:CPU; None (one `vmap`) elsewhere."""
+    return 1 if jax.default_backend() == "cpu" else None
+
+
 def _loss(r):
     with np.errstate(over="ignore", invalid="ignore"):
         loss = 0.5 * np.sum(r**2, axis=-1)
@@ -321,7 +327,7 @@ def optimize(terms, param: Parametrization | None = None, z0=None, *, n: int = 4
     problem = Problem(terms, param, n)
     t0 = time.perf_counter()
     if isinstance(batch_size, str) and batch_size == "auto":
-        batch_size = 1 if jax.default_backend() == "cpu" else None
+        batch_size = auto_batch_size()
     if batch_size is not None and (isinstance(batch_size, bool) or not isinstance(batch_size, int)
                                    or batch_size < 1):
         raise ValueError(f"batch_size: must be None, 'auto' or a positive integer, got {batch_size!r}")

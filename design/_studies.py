@@ -33,7 +33,7 @@ import jaxrod as jr
 
 from ._critical import design_scene
 from ._objectives import AlphaDown, AlphaUp, SnapSpeed, dynamics_available
-from ._optimize import DesignResult, MultiStartResult, Problem, _linearize_batch, optimize
+from ._optimize import DesignResult, MultiStartResult, Problem, _linearize_batch, auto_batch_size, optimize
 from ._params import NAMES, Parametrization
 
 
@@ -304,7 +304,7 @@ def _polish_psi0(d, terms, param, n, window, xtol):
     compiled (`_linearize_batch` of the same problem: no new compilation). Returns the
     design with the better of the two points and a record of the polish."""
     problem = Problem(terms, param, n)
-    batch = 1 if jax.default_backend() == "cpu" else None
+    batch = auto_batch_size()  # as `optimize` ran it: the same compiled program
     free = [k for k in NAMES if k in param.free]
     i = free.index("psi0_deg")
     z_best = np.asarray(d.z, float)
