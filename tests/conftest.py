@@ -55,7 +55,7 @@ def pytest_configure(config):
 
 
 # Modules by measured cost (seconds on 2 cores, cold cache), slowest first; the rest keep
-# their order after these. test_snap_physics holds the phase-diagram grid check (~60 s).
+# their order after these.
 # test_design_speed runs study (c) at the notebook's quick-mode mesh (N = 16): scheduled after
 # notebook 03 has compiled those programs into the shared persistent cache, not beside it
 # (both compiling them at once cost ~60 s more).
