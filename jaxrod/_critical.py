@@ -48,6 +48,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array
 
+from . import _linalg
 from ._continuation import AbstractParameter, Gap, SymmetricAlpha
 from ._energy.geometry import discretize
 from ._energy.lagrangian import lagrangian, positions
@@ -147,7 +148,7 @@ def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True):
     def body(c):
         z, k, _, _ = c
         r = res(z)
-        dz = jnp.linalg.solve(jac(z), -r)
+        dz = _linalg.solve(jac(z), -r)
         z = z + dz
         done = (jnp.abs(dz[idx_alpha]) < tol_alpha) & (jnp.max(jnp.abs(dz)) < 1e3 * tol_alpha)
         return z, k + 1, done, jnp.max(jnp.abs(r))
@@ -160,7 +161,7 @@ def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True):
 
 def _implicit_step(res_p, z, jac_z):
     """z - J^{-1} R(z; p) with J frozen: value z (at a root), derivative -J^{-1} dR/dp."""
-    return z - jnp.linalg.solve(lax.stop_gradient(jac_z), res_p(z))
+    return z - _linalg.solve(lax.stop_gradient(jac_z), res_p(z))
 
 
 def extended_jacobian(scene, cp: CriticalPoint, parameter: AbstractParameter = SymmetricAlpha()):
@@ -205,7 +206,7 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
     # starting mode force: K (v, vm) ~ 0 in its mu rows -> least-squares vm from the theta rows
     gt0 = _hvp(scene_sg, parameter, theta, force, alpha, mode, jnp.zeros(2, dtype))[0]
     P = jax.jacfwd(lambda mm: _grad(scene_sg, parameter, theta, mm, alpha)[0])(force)  # (N, 2)
-    vm0 = -jnp.linalg.lstsq(P, gt0)[0]
+    vm0 = -_linalg.lstsq2(P, gt0)
     kind = jnp.asarray(kind)
 
     outs = []
@@ -311,7 +312,7 @@ def cusp_point(scene, theta, force, alpha, mode, *, parameter: AbstractParameter
     ell = w * mode
     gt0 = _hvp(scene_sg, parameter, theta, force, alpha, mode, jnp.zeros(2, dtype))[0]
     P = jax.jacfwd(lambda mm: _grad(scene_sg, parameter, theta, mm, alpha)[0])(force)
-    vm0 = -jnp.linalg.lstsq(P, gt0)[0]
+    vm0 = -_linalg.lstsq2(P, gt0)
     z0 = jnp.concatenate([_fold_pack(theta, force, alpha, mode, vm0), jnp.asarray(scene_sg.clamps.gap, dtype)[None]])
 
     def res(z, sc):

@@ -45,6 +45,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array
 
+from . import _linalg
 from ._continuation import AbstractParameter, SymmetricAlpha, require_float64
 from ._critical import (CriticalPoint, CuspPoint, KIND_BRANCH_POINT, _fold_pack, _fold_residual, _fold_unpack,
                         _set_gap, _sym_pack, _sym_residual, _sym_unpack, cusp_point)
@@ -153,7 +154,7 @@ def _continue_critical(scene, cp, direction, gap_bounds, parameter, ds, ds_min, 
     def tangent(w, ell, t_old):
         J = jax.jacfwd(R)(w, ell)
         A = jnp.concatenate([J, (W * t_old)[None]], axis=0)
-        t = jnp.linalg.solve(A, jnp.zeros(M, dtype).at[-1].set(1.0))
+        t = _linalg.solve(A, jnp.zeros(M, dtype).at[-1].set(1.0))
         return t / jnp.sqrt(jnp.sum(W * t * t))
 
     def correct(wp, t, ell):
@@ -167,7 +168,7 @@ def _continue_critical(scene, cp, direction, gap_bounds, parameter, ds, ds_min, 
             def F(w):
                 return jnp.concatenate([R(w, ell), jnp.sum(W * t * (w - wp))[None]])
 
-            dw = jnp.linalg.solve(jax.jacfwd(F)(w), -F(w))
+            dw = _linalg.solve(jax.jacfwd(F)(w), -F(w))
             return w + dw, k + 1, jnp.max(jnp.abs(dw)) < tol
 
         w, k, done = lax.while_loop(cond, body, (wp, jnp.zeros((), jnp.int32), jnp.zeros((), bool)))

@@ -40,10 +40,10 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jax import lax
 
 from ._energy.bending import bending_energy, turning_angles
 from ._energy.geometry import discretize
+from ._linalg import tridiagonal_solve
 from ._misc import check_param
 
 
@@ -220,7 +220,7 @@ def accelerations(t, y, scene, protocol, dissipation, baumgarte, d=None, with_wo
     lower = jnp.concatenate([jnp.zeros(1, c.dtype), c * invm[1:-1]])
     upper = jnp.concatenate([c * invm[1:-1], jnp.zeros(1, c.dtype)])
     rhs = -d.h * omega**2 - jnp.sum(tt * (b[1:] - b[:-1]), -1)
-    T = lax.linalg.tridiagonal_solve(lower, diag, upper, rhs[:, None])[:, 0]
+    T = tridiagonal_solve(lower, diag, upper, rhs[:, None])[:, 0]
     F_t = jnp.zeros_like(x).at[:-1].add(T[:, None] * tt).at[1:].add(-T[:, None] * tt)
     a = b + invm[:, None] * F_t
     acc = jnp.sum(nn * (a[1:] - a[:-1]), -1) / d.h

@@ -31,6 +31,7 @@ from ._dynamics import Protocol
 from ._energy.geometry import discretize
 from ._equilibrium import solve_equilibrium
 from ._initial import initial_state
+from ._linalg import solve2
 from ._misc import check_param
 from ._snap import snap_angles
 from ._solution import RESULTS
@@ -60,7 +61,7 @@ def project(theta, scene, steps=8):
     def body(_, th):
         c = jnp.stack([jnp.sum(d.h * jnp.cos(th)), jnp.sum(d.h * jnp.sin(th))]) - target
         A = jnp.stack([-d.h * jnp.sin(th), d.h * jnp.cos(th)])
-        return th - A.T @ jnp.linalg.solve(A @ A.T, c)
+        return th - A.T @ solve2(A @ A.T, c)
 
     return jax.lax.fori_loop(0, steps, body, theta)
 

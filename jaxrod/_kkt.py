@@ -10,8 +10,8 @@ C\in\mathbb R^{2\times 2}\ (C=0\ \text{when inextensible}).$$
 * It is assembled from 5 Hessian-vector products of the autodiff gradient: three
   colour probes recover the tridiagonal block ($|i-j|\le1$ means columns $i\bmod 3$
   never collide), two unit probes recover the border.
-* Solves use `lax.linalg.tridiagonal_solve` (LAPACK `gtsv`) on three right-hand sides
-  and a $2\times2$ Schur complement $S=C-P^\top T^{-1}P$: $O(N)$.
+* Solves use `_linalg.tridiagonal_solve` (LAPACK `gtsv`; a pivoting scan under `vmap`)
+  on three right-hand sides and a $2\times2$ Schur complement $S=C-P^\top T^{-1}P$: $O(N)$.
 * Stability: the constrained stiffness problem is $T v + P w = \lambda v$,
   $P^\top v + Cw = 0$. By Haynsworth's inertia additivity the number of its
   eigenvalues below $\sigma$ is
@@ -29,6 +29,8 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array
+
+from ._linalg import _tri_primal, solve2 as _solve2, tridiagonal_solve
 
 
 class BorderedTridiagonal(NamedTuple):
@@ -75,12 +77,6 @@ def assemble(grad_fn, theta, mu) -> BorderedTridiagonal:
     return BorderedTridiagonal(lower, diag, upper, border, corner)
 
 
-def _solve2(S, r):
-    """Closed-form solve of 2x2 systems (Cramer's rule): one fused op instead of LAPACK."""
-    det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
-    return jnp.stack([S[1, 1] * r[0] - S[0, 1] * r[1], S[0, 0] * r[1] - S[1, 0] * r[0]]) / det
-
-
 def structured(theta, mu, scene, d=None) -> BorderedTridiagonal:
     """The Hessian of the condensed Lagrangian, assembled per stencil (see
     `_energy.lagrangian.hessian_blocks`); equal to `assemble` of its gradient."""
@@ -95,7 +91,7 @@ def matvec(K: BorderedTridiagonal, vt, vm):
 
 
 def _tri(K, shift, rhs):
-    return lax.linalg.tridiagonal_solve(K.lower, K.diag - shift, K.upper, rhs)
+    return tridiagonal_solve(K.lower, K.diag - shift, K.upper, rhs)
 
 
 def solve(K: BorderedTridiagonal, rt, rm, shift=0.0):

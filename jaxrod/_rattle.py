@@ -46,10 +46,11 @@ import jax.numpy as jnp
 from jax import lax
 
 from ._dynamics import applied_forces, inverse_node_mass, kinematics, link_pairs
+from ._linalg import tridiagonal_solve
 
 
 def _tri(lower, diag, upper, rhs):
-    return lax.linalg.tridiagonal_solve(lower, diag, upper, rhs[:, None])[:, 0]
+    return tridiagonal_solve(lower, diag, upper, rhs[:, None])[:, 0]
 
 
 def _spread(mu, dx):
