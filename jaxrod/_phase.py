@@ -19,10 +19,16 @@ $\Psi_0$ and the gaps are traced, so every chunk reuses one compilation (per mes
 length). Each gap keeps its own result code: a gap where a state does not exist gives
 NaN angles there and does not affect the others.
 
-Why not `vmap`: batched, the loops of every member run as long as the slowest one, and on
-XLA:CPU the batched LAPACK kernels inside them (jaxlib's `ParallelBatchMap` for the
-tridiagonal and dense solves) deadlocked on a 2-core machine (every thread waiting; seen
-with 9 and 41 gaps, not with 3). The warm starts also need the gaps in order.
+**One vmapped call** (`batch="vmap"`, the default on a GPU): every $\Psi_0$ chunk of the
+grid in a single jitted call, `vmap` over $\Psi_0$ of the same scan over the gaps (same
+warm starts, same per-gap result codes). Batched, each loop runs as long as its slowest
+member and does every member's work, and an `lax.cond` on a batched predicate would run
+both branches; the homotopy fallback is therefore a while loop of at most one pass
+(`_run_if`), which under `vmap` runs only when some member needs it. On XLA:CPU the
+batched linear algebra goes through `jaxrod._linalg` (batched LAPACK calls inside the
+loops had deadlocked 2-core machines). Measured on 2 CPU cores the sequential chunks are
+faster than the vmapped call (`benchmarks/bench_snap.py` times both side by side), so
+`batch="auto"` picks `"scan"` (one call per $\Psi_0$) on the CPU and `"vmap"` elsewhere.
 
 With `out`, each finished chunk is written to `out/chunks/psi0_<deg>.nc` (NetCDF3 via
 scipy) and the run is resumable: a chunk whose file exists with the same grid, $s_0$
@@ -72,9 +78,20 @@ def _warm_or_homotopy(scene, sgn, t_prev, m_prev, ok_prev):
         eq = solve_equilibrium(scene, t_prev, m_prev)
         return _tracked(eq, sgn, t_prev, scene), jax.tree.map(lambda x, s: jnp.asarray(x, s.dtype), arrays(eq), shapes)
 
-    good, eq_w = lax.cond(ok_prev, warm, lambda: (jnp.zeros((), bool), zeros()))
-    eq = lax.cond(good, lambda: eq_w, lambda: arrays(_initial_state(scene, sgn)))
+    good, eq_w = _run_if(ok_prev, warm, (jnp.zeros((), bool), zeros()))
+    eq = _run_if(~good, lambda: arrays(_initial_state(scene, sgn)), eq_w)
     return eqx.combine(eq, static), good
+
+
+def _run_if(pred, fn, default):
+    """`fn()` where `pred`, else `default` (same structure). A while loop of at most one
+    pass rather than `lax.cond`: unbatched the two are the same, but under `vmap` a cond
+    on a batched predicate becomes a select that runs `fn` for every member every time,
+    while this loop runs it only when some member needs it (masked for the others)."""
+    def body(c):
+        return jnp.zeros((), bool), fn()
+
+    return lax.while_loop(lambda c: c[0], body, (jnp.asarray(pred, bool), default))[1]
 
 
 @eqx.filter_jit
@@ -106,6 +123,20 @@ def _chunk(psi0, gaps, s0, mesh):
 
     init = (jnp.zeros((2, N), dtype), jnp.zeros((2, 2), dtype), jnp.zeros((2,), bool))
     return lax.scan(one, init, gaps)[1]
+
+
+@eqx.filter_jit
+def _grid(psis, gaps, s0, mesh):
+    """All chunks in one call: `vmap` over the fold angles (rad) of `_chunk`."""
+    return jax.vmap(lambda p: _chunk(p, gaps, s0, mesh))(psis)
+
+
+def _resolve_batch(batch):
+    if batch not in ("auto", "scan", "vmap"):
+        raise ValueError(f"batch must be 'auto', 'scan' or 'vmap', got {batch!r}")
+    if batch == "auto":
+        return "scan" if jax.default_backend() == "cpu" else "vmap"
+    return batch
 
 
 def _attrs(gaps, s0, n, refine):
@@ -151,20 +182,24 @@ def _write(ds, path):
     os.replace(tmp, path)  # atomic: an interrupted write never leaves a half chunk
 
 
-def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progress=True, on_chunk=None):
+def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progress=True, on_chunk=None,
+                  batch="auto"):
     r"""Critical clamp angles over the grid `psi0_deg` x `gaps` (an `xarray.Dataset`).
 
     **Arguments:** `psi0_deg` fold angles in (0, 180] (degrees), `gaps` values of $G/L$ in
     (0, 1), `s0`, `n`, `refine` as in [`jaxrod.make_scene`][]; `out` a directory for the
     resumable chunk files and `phase_diagram.nc`; `progress` a tqdm bar;
-    `on_chunk(psi0_deg, computed: bool)` called after each chunk.
+    `on_chunk(psi0_deg, computed: bool)` called after each chunk; `batch` `"scan"` (one
+    compiled call per $\Psi_0$), `"vmap"` (every $\Psi_0$ still to compute in one vmapped
+    call) or `"auto"` (`"scan"` on the CPU, where it measured faster, else `"vmap"`). Both
+    give the same numbers.
 
     **Returns:** dataset with dims `(psi0, gap)`: `alpha_c_up`, `alpha_c_down` (degrees,
     NaN where the path does not snap), `kind_up`/`kind_down` (0 none, 1 fold, 2 branch
     point), fold heights before/after each snap, `start_up`/`start_down` (RESULTS codes of
     the start states), `warm_starts` (how many of the two start states came from the
     previous gap, see the module docstring); attribute `computed_chunks` lists the $\Psi_0$ computed by this call
-    (the others were read back from `out`). Needs float64.
+    (the others were read back from `out`), `batch` the mode used. Needs float64.
     """
     import xarray as xr
 
@@ -185,6 +220,14 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
         os.makedirs(os.path.join(out, "chunks"), exist_ok=True)
     g_arr = jnp.asarray(gaps, jnp.float64)
     s0_arr = jnp.asarray(float(s0), jnp.float64)
+    batch = _resolve_batch(batch)
+    cached = {p: (_read_chunk(_chunk_path(out, p), attrs) if out is not None else None) for p in psis}
+    todo = [p for p in psis if cached[p] is None]
+    batched = {}
+    if batch == "vmap" and todo:
+        # one call for every chunk still missing (the finished ones were read back above)
+        vals = jax.device_get(_grid(jnp.asarray([math.radians(p) for p in todo], jnp.float64), g_arr, s0_arr, mesh))
+        batched = {p: {k: v[i] for k, v in vals.items()} for i, p in enumerate(todo)}
     chunks, computed = [], []
     it = psis
     if progress:
@@ -192,9 +235,11 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
 
         it = tqdm(psis, desc="phase diagram", unit="Psi0")
     for p in it:
-        ds = _read_chunk(_chunk_path(out, p), attrs) if out is not None else None
+        ds = cached[p]
         if ds is None:
-            vals = jax.device_get(_chunk(jnp.asarray(math.radians(p), jnp.float64), g_arr, s0_arr, mesh))
+            vals = batched.get(p)
+            if vals is None:
+                vals = jax.device_get(_chunk(jnp.asarray(math.radians(p), jnp.float64), g_arr, s0_arr, mesh))
             ds = _chunk_dataset(p, gaps, vals, attrs)
             if out is not None:
                 _write(ds, _chunk_path(out, p))
@@ -210,6 +255,7 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     if out is not None:
         _write(full, os.path.join(out, "phase_diagram.nc"))
     full.attrs["computed_chunks"] = computed
+    full.attrs["batch"] = batch
     return full
 
 

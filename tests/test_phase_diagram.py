@@ -1,5 +1,6 @@
 """Phase diagram (paper Fig. 2c): resumable NetCDF chunks, the CLI, the figure, and
-(slow) the real vmapped computation against single `snap_angles` calls."""
+the real chunked computation against single `snap_angles` calls, and the one vmapped call
+against the chunks."""
 
 import json
 import os
@@ -149,3 +150,48 @@ def test_warm_started_chunk_equals_single_calls(tmp_path):
     down = jr.initial_state(jr.make_scene(30.0, 0.8, 0.0, n=n), "down")
     assert down.result == jr.RESULTS.state_not_found
     assert int(warm.sel(psi0=30.0, gap=0.8)) == 1 and int(warm.sel(psi0=30.0, gap=0.82)) == 1
+
+
+def test_vmap_mode_computes_missing_chunks_in_one_call(tmp_path, monkeypatch):
+    """`batch="vmap"`: one call of the vmapped grid for every chunk not on disk yet."""
+    calls, grid_calls = [], []
+    fake = _fake_chunk(calls)
+    monkeypatch.setattr(_phase, "_chunk", fake)
+
+    def grid(psis, gaps, s0, mesh):
+        grid_calls.append([float(p) for p in psis])
+        outs = [fake(p, gaps, s0, mesh) for p in psis]
+        return {k: np.stack([o[k] for o in outs]) for k in outs[0]}
+
+    monkeypatch.setattr(_phase, "_grid", grid)
+    gaps = [0.2, 0.5, 0.8]
+    jr.phase_diagram([60.0], gaps, out=str(tmp_path), progress=False, batch="scan")
+    ds = jr.phase_diagram([30.0, 60.0, 180.0], gaps, out=str(tmp_path), progress=False, batch="vmap")
+    assert len(grid_calls) == 1 and np.allclose(grid_calls[0], np.radians([30.0, 180.0]))
+    assert ds.attrs["computed_chunks"] == [30.0, 180.0] and ds.attrs["batch"] == "vmap"
+    ref = jr.phase_diagram([30.0, 60.0, 180.0], gaps, progress=False, batch="scan")
+    for k in _phase.VARIABLES:
+        np.testing.assert_array_equal(ds[k].values, ref[k].values)
+    with pytest.raises(ValueError, match="batch"):
+        jr.phase_diagram([60.0], gaps, progress=False, batch="loop")
+
+
+def test_one_vmapped_call_equals_the_chunks():
+    """The real computation as one jitted, vmapped call over Psi0 (`batch="vmap"`; batched
+    linear algebra through `jaxrod._linalg`, the homotopy fallback a masked while loop)
+    gives the per-Psi0 chunks' numbers: same kinds, start codes and warm starts, alpha_c
+    and fold heights to 1e-9. The grid includes a gap with no down state (30 deg, 0.8),
+    where only that member falls back to the homotopy."""
+    gaps = [0.3, 0.5, 0.8]
+    kw = dict(n=40, progress=False)
+    scan = jr.phase_diagram([30.0, 60.0, 180.0], gaps, batch="scan", **kw)
+    vm = jr.phase_diagram([30.0, 60.0, 180.0], gaps, batch="vmap", **kw)
+    for k in _phase.VARIABLES:
+        a, b = scan[k].values, vm[k].values
+        if a.dtype.kind == "f":
+            np.testing.assert_allclose(b, a, rtol=0, atol=1e-9, err_msg=k)
+            assert np.array_equal(np.isnan(a), np.isnan(b)), k
+        else:
+            np.testing.assert_array_equal(b, a, err_msg=k)
+    assert np.isnan(vm["alpha_c_down"].sel(psi0=30.0, gap=0.8))
+    assert np.isfinite(vm["alpha_c_up"].sel(psi0=60.0, gap=[0.3, 0.5])).all()  # G*_up(60) = 0.767
