@@ -155,13 +155,75 @@ def test_no_missed_instability_dense(snap, psi0, gap):
     _check_no_missed_instability(snap(psi0, gap), jr.make_scene(psi0, gap, 0.0))
 
 
-@pytest.mark.slow  # 64 s alone; in CI it took the suite from 555 s to 601 s on a loaded 2-core machine
+@eqx.filter_jit
+def _dense_hessians(sc, theta, force, lam, lam_mid):
+    """Batched over branch points: the dense bordered Hessian at each point and at a fresh
+    plain-Newton solution at the parameter between it and the next, and that solve's code."""
+
+    def one(t, m, a, a_mid):
+        def at(x):
+            return eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), sc, (x, x))
+
+        eq = jr.Equilibrium(t, m, jr.RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), at(a))
+        mid = jr.solve_equilibrium(at(a_mid), t, m, solver=jr.Newton(minimize=False))
+        return jr.hessian(eq).dense(), jr.hessian(mid).dense(), mid.result == jr.RESULTS.successful
+
+    return jax.vmap(one)(theta, force, lam, lam_mid)
+
+
+def _numpy_min_eig(K):
+    """Smallest eigenvalue of the constrained stiffness, in numpy (LAPACK through numpy, not
+    jaxrod's Sturm counts): Z^T T Z with Z an orthonormal basis of ker P^T (inextensible)."""
+    N = K.shape[-1] - 2
+    T, P = K[:, :N, :N], K[:, :N, N:]
+    Z = np.linalg.qr(P, mode="complete")[0][:, :, 2:]
+    return np.linalg.eigvalsh(np.swapaxes(Z, 1, 2) @ T @ Z)[:, 0]
+
+
+def _check_no_missed_instability_batched(r, sc, pad=64):
+    """`_check_no_missed_instability` with the dense Hessians of a whole path in one
+    vmapped call (padded to a multiple of `pad` points, so few programs compile) and the
+    eigenvalues in numpy."""
+    for path in (r.up, r.down):
+        b = jax.tree.map(lambda x: np.asarray(x[0]), path.branch)
+        n = int(b.count)
+        m = -(-n // pad) * pad
+        idx = np.minimum(np.arange(m), n - 1)
+        nxt = b.lam[np.minimum(idx + 1, n - 1)]
+        K0, K1, ok = jax.device_get(_dense_hessians(sc, b.theta[idx], b.force[idx], b.lam[idx],
+                                                    0.5 * (b.lam[idx] + nxt)))
+        mins = _numpy_min_eig(K0[:n])
+        nm = max(n - 2 if bool(path.snaps) else n - 1, 0)  # midpoints between stable points only
+        assert np.all(ok[:nm]), np.nonzero(~ok[:nm])[0]
+        mids = _numpy_min_eig(K1[:nm])
+        if bool(path.snaps):
+            assert np.all(mins[:-1] > 0) and mins[-1] < 0, mins
+        else:
+            assert np.all(mins > 0), mins
+        assert np.all(mids > 0), mids
+
+
+def test_batched_check_agrees_with_the_pointwise_one(snap):
+    """The grid check's batched dense eigenvalues equal the pointwise ones (60 deg, 0.5)."""
+    r, sc = snap(60.0, 0.5), jr.make_scene(60.0, 0.5, 0.0)
+    b = jax.tree.map(lambda x: np.asarray(x[0]), r.up.branch)
+    i = np.array([0, int(b.count) // 2, int(b.count) - 1])
+    K0, _, _ = jax.device_get(_dense_hessians(sc, b.theta[i], b.force[i], b.lam[i], b.lam[i]))
+    for j, k in enumerate(i):
+        e0, _, _ = _dense_min_eig(sc, jnp.asarray(b.theta[k]), jnp.asarray(b.force[k]), jnp.asarray(b.lam[k]),
+                                  jnp.asarray(b.lam[k]))
+        assert abs(_numpy_min_eig(K0[j:j + 1])[0] - float(e0)) < 1e-8 * max(1.0, abs(float(e0)))
+    _check_no_missed_instability_batched(r, sc)
+
+
+@pytest.mark.slow  # 64 s alone pointwise; in CI it took the suite from 555 s to 601 s on a loaded 2-core machine
 def test_no_missed_instability_on_the_phase_diagram_grid(snap):
     """The same check at every point of the phase-diagram grid (5 Psi0 x 41 gaps, N = 100):
-    no branch point (or fold) is stepped over anywhere on it (passed 2026-12-02, 64 s alone)."""
+    no branch point (or fold) is stepped over anywhere on it (pointwise version passed
+    2026-12-02 in 64 s alone; now one vmapped call per path, eigenvalues in numpy)."""
     for psi0 in (30.0, 60.0, 90.0, 120.0, 180.0):
         for gap in np.round(np.arange(0.1, 0.9 + 1e-9, 0.02), 10):
-            _check_no_missed_instability(snap(psi0, float(gap)), jr.make_scene(psi0, float(gap), 0.0))
+            _check_no_missed_instability_batched(snap(psi0, float(gap)), jr.make_scene(psi0, float(gap), 0.0))
 
 
 @pytest.mark.parametrize("psi0, gap, s0", [(60.0, 0.05, 0.02), (60.0, 0.95, 0.02), (10.0, 0.5, 0.02),
