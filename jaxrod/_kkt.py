@@ -30,7 +30,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array
 
-from ._linalg import _tri_primal, solve2 as _solve2, tridiagonal_solve
+from ._linalg import solve2 as _solve2, tridiagonal_solve
 
 
 class BorderedTridiagonal(NamedTuple):
