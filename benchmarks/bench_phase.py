@@ -21,7 +21,6 @@ import datetime
 import json
 import os
 import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -38,17 +37,10 @@ import numpy as np  # noqa: E402
 
 import jaxrod as jr  # noqa: E402
 from jaxrod import _phase  # noqa: E402
+from bench_batch import _git  # noqa: E402  (the commit recorded with the results, as bench_batch does)
 
 
 HERE = Path(__file__).resolve().parent
-
-
-def _git():
-    try:
-        return subprocess.run(["git", "rev-parse", "--short=10", "HEAD"], capture_output=True, text=True,
-                              cwd=HERE).stdout.strip()
-    except OSError:
-        return "unknown"
 
 
 def run(batch, psis, gaps, n, repeats):

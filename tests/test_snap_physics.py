@@ -110,16 +110,18 @@ def test_paper_facts(snap):
     assert 0 < float(r.up.alpha_c) < abs(float(r.down.alpha_c))
 
 
+def _at(sc, a):
+    """`sc` with both clamps at the angle `a` (symmetric actuation)."""
+    return eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), sc, (a, a))
+
+
 @eqx.filter_jit
 def _dense_min_eig(sc, theta, force, lam, lam_mid):
     """Smallest dense eigenvalue of the reduced Hessian at branch point `lam` and, solved
     afresh by plain Newton from there, at the parameter `lam_mid` between two points."""
-    def at(a):
-        return eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), sc, (a, a))
-
     eq = jr.Equilibrium(theta, force, jr.RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32),
-                        at(lam))
-    mid = jr.solve_equilibrium(at(lam_mid), theta, force, solver=jr.Newton(minimize=False))
+                        _at(sc, lam))
+    mid = jr.solve_equilibrium(_at(sc, lam_mid), theta, force, solver=jr.Newton(minimize=False))
     e0 = jnp.linalg.eigvalsh(jr.dense_reduced_hessian(eq))[0]
     e1 = jnp.linalg.eigvalsh(jr.dense_reduced_hessian(mid))[0]
     return e0, e1, mid.result == jr.RESULTS.successful
@@ -161,11 +163,9 @@ def _dense_hessians(sc, theta, force, lam, lam_mid):
     plain-Newton solution at the parameter between it and the next, and that solve's code."""
 
     def one(t, m, a, a_mid):
-        def at(x):
-            return eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), sc, (x, x))
-
-        eq = jr.Equilibrium(t, m, jr.RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), at(a))
-        mid = jr.solve_equilibrium(at(a_mid), t, m, solver=jr.Newton(minimize=False))
+        eq = jr.Equilibrium(t, m, jr.RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32),
+                            _at(sc, a))
+        mid = jr.solve_equilibrium(_at(sc, a_mid), t, m, solver=jr.Newton(minimize=False))
         return jr.hessian(eq).dense(), jr.hessian(mid).dense(), mid.result == jr.RESULTS.successful
 
     return jax.vmap(one)(theta, force, lam, lam_mid)
