@@ -16,6 +16,7 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from . import _kkt
+from ._linalg import solve2
 
 
 class Stability(eqx.Module):
@@ -68,4 +69,4 @@ def dense_reduced_hessian(eq):
         q, _ = jnp.linalg.qr(P, mode="complete")
         Z = q[:, 2:]
         return Z.T @ T @ Z
-    return T - P @ jnp.linalg.solve(C, P.T)
+    return T - P @ solve2(C, P.T)

@@ -122,6 +122,27 @@ def test_dense_solve_values_and_derivatives():
     np.testing.assert_allclose(jax.jacfwd(L.solve)(A[0], r[0]), jax.jacfwd(jnp.linalg.solve)(A[0], r[0]), rtol=1e-10)
 
 
+def test_eigh_values_and_derivatives():
+    """`eigh` equals `jnp.linalg.eigh` (values, vectors up to sign), batched too, and its
+    jvp, grad and vmap(grad) equal jax's own rule (on a sign-invariant function of the
+    vectors), with a non-symmetric input symmetrized as jax does."""
+    rng = np.random.default_rng(11)
+    A = rng.normal(size=(5, 8, 8))
+    A = A + np.swapaxes(A, 1, 2)
+    w, v = jax.vmap(L.eigh)(A)
+    wr, vr = np.linalg.eigh(A)
+    np.testing.assert_allclose(w, wr, rtol=1e-11, atol=1e-12)
+    np.testing.assert_allclose(np.abs(np.sum(v * vr, axis=1)), 1.0, rtol=1e-10)
+    f = lambda eig: lambda a: jnp.sum(jnp.sin(eig(a)[0])) + jnp.sum(eig(a)[1][:, 2] ** 2 * jnp.arange(8.0))  # noqa: E731
+    for a in (A[0], A[1] + rng.normal(size=(8, 8))):
+        np.testing.assert_allclose(jax.grad(f(L.eigh))(a), jax.grad(f(jnp.linalg.eigh))(a), rtol=1e-9, atol=1e-12)
+        t = rng.normal(size=(8, 8))
+        np.testing.assert_allclose(jax.jvp(f(L.eigh), (a,), (t,))[1], jax.jvp(f(jnp.linalg.eigh), (a,), (t,))[1],
+                                   rtol=1e-9)
+    np.testing.assert_allclose(jax.vmap(jax.grad(f(L.eigh)))(A), jax.vmap(jax.grad(f(jnp.linalg.eigh)))(A),
+                               rtol=1e-9, atol=1e-12)
+
+
 def test_small_closed_forms():
     rng = np.random.default_rng(9)
     S = rng.normal(size=(2, 2))
