@@ -96,11 +96,13 @@ def _run_if(pred, fn, default):
 
 
 @eqx.filter_jit
-def _chunk(psi0, gaps, s0, mesh):
+def _chunk(psi0, gaps, s0, mesh, keep_branch=False):
     """All gaps at one fold angle (rad), one gap after the other (`lax.scan`): the start
     states of each gap by Newton from the previous gap's (homotopy where that fails), then
     `snap_angles` from them without the extended-system polish (bisection values) and
-    without following the landed branch."""
+    without following the landed branch. `keep_branch` (static) also returns each path's
+    walked branch (`branch_up`, `branch_down`: the first continuation stage, a `Branch`
+    per gap) for the tests that check the walks themselves."""
     par = SymmetricAlpha()
     dtype = psi0.dtype
     N = mesh.n
@@ -108,9 +110,17 @@ def _chunk(psi0, gaps, s0, mesh):
     def one(carry, g):
         t_prev, m_prev, ok_prev = carry
         scene = par.set(_float_scene(Scene(Strip(psi0=psi0, s0=s0), Clamps(g), mesh)), 0.0)
-        eqs, warmed = zip(*[_warm_or_homotopy(scene, jnp.asarray(sgn, dtype), t_prev[i], m_prev[i], ok_prev[i])
-                            for i, sgn in enumerate((1.0, -1.0))])
-        starts = jax.tree.map(lambda a, b: jnp.stack([a, b]), *eqs)
+        # both start states through one traced body (`lax.map` over the side): one compiled
+        # copy of the warm Newton and of the homotopy instead of two (XLA compile at -O0 25 s -> 20 s)
+        is_sds = lambda x: isinstance(x, jax.ShapeDtypeStruct)  # noqa: E731
+        static = eqx.filter(eqx.filter_eval_shape(_initial_state, scene, jnp.ones((), dtype)), is_sds, inverse=True)
+
+        def start(args):
+            eq, good = _warm_or_homotopy(scene, *args)
+            return eqx.filter(eq, eqx.is_array), good
+
+        eqs, warmed = lax.map(start, (jnp.asarray([1.0, -1.0], dtype), t_prev, m_prev, ok_prev))
+        starts = eqx.combine(eqs, static)
         r = _snap_angles_from(scene, starts, Continuation(), jnp.pi, 24, False, continue_after_snap=False)
         out = {}
         for name, p in (("up", r.up), ("down", r.down)):
@@ -119,7 +129,10 @@ def _chunk(psi0, gaps, s0, mesh):
             out[f"fold_height_before_{name}"] = p.fold_height_before
             out[f"fold_height_after_{name}"] = p.fold_height_after
             out[f"start_{name}"] = p.result._value.astype(jnp.int32)
-        out["warm_starts"] = jnp.stack(warmed).astype(jnp.int32).sum()
+        out["warm_starts"] = warmed.astype(jnp.int32).sum()
+        if keep_branch:
+            for name, p in (("up", r.up), ("down", r.down)):
+                out[f"branch_{name}"] = jax.tree.map(lambda x: x[0], p.branch)
         return (starts.theta, starts.force, starts.result == RESULTS.successful), out
 
     init = (jnp.zeros((2, N), dtype), jnp.zeros((2, 2), dtype), jnp.zeros((2,), bool))

@@ -158,72 +158,154 @@ def test_no_missed_instability_dense(snap, psi0, gap):
 
 
 @eqx.filter_jit
-def _dense_hessians(sc, theta, force, lam, lam_mid):
-    """Batched over branch points: the dense bordered Hessian at each point and at a fresh
-    plain-Newton solution at the parameter between it and the next, and that solve's code."""
+def _dense_hessians(psi0, gap, theta, force, lam, lam_mid):
+    """Batched over points, each with its own scene (fold angle `psi0` in rad, `gap`; s0 and
+    the mesh the defaults, 0.02 and N = 100): the dense bordered Hessian at the point and at
+    a fresh plain-Newton solution at the parameter `lam_mid`, and that solve's code."""
+    from jaxrod._equilibrium import _float_scene
+    from jaxrod._rod import Clamps, Mesh, Scene, Strip
 
-    def one(t, m, a, a_mid):
+    def one(p, g, t, m, a, a_mid):
+        sc = _float_scene(Scene(Strip(psi0=p, s0=0.02), Clamps(g), Mesh(100, 1.0)))
         eq = jr.Equilibrium(t, m, jr.RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32),
                             _at(sc, a))
         mid = jr.solve_equilibrium(_at(sc, a_mid), t, m, solver=jr.Newton(minimize=False))
         return jr.hessian(eq).dense(), jr.hessian(mid).dense(), mid.result == jr.RESULTS.successful
 
-    return jax.vmap(one)(theta, force, lam, lam_mid)
+    return jax.vmap(one)(psi0, gap, theta, force, lam, lam_mid)
 
 
-def _numpy_min_eig(K):
-    """Smallest eigenvalue of the constrained stiffness, in numpy (LAPACK through numpy, not
-    jaxrod's Sturm counts): Z^T T Z with Z an orthonormal basis of ker P^T (inextensible)."""
+def _dense_hessians_blocks(cols, block=512):
+    """`_dense_hessians` over any number of points, in blocks of `block` (the last padded
+    with repeats), so one program serves every call."""
+    n = len(cols[0])
+    out = []
+    for i in range(0, n, block):
+        idx = np.minimum(np.arange(i, i + block), n - 1)
+        out.append(jax.device_get(_dense_hessians(*[np.asarray(c)[idx] for c in cols])))
+    return [np.concatenate(x)[:n] for x in zip(*out)]
+
+
+def _reduced(K):
+    """The constrained stiffness Z^T T Z of bordered Hessians K = [[T, P], [P^T, 0]], in numpy
+    (not jaxrod's Sturm counts): Z an orthonormal basis of ker P^T (inextensible)."""
     N = K.shape[-1] - 2
     T, P = K[:, :N, :N], K[:, :N, N:]
     Z = np.linalg.qr(P, mode="complete")[0][:, :, 2:]
-    return np.linalg.eigvalsh(np.swapaxes(Z, 1, 2) @ T @ Z)[:, 0]
+    return np.swapaxes(Z, 1, 2) @ T @ Z
 
 
-def _check_no_missed_instability_batched(r, sc, pad=64):
-    """`_check_no_missed_instability` with the dense Hessians of a whole path in one
-    vmapped call (padded to a multiple of `pad` points, so few programs compile) and the
-    eigenvalues in numpy."""
-    for path in (r.up, r.down):
-        b = jax.tree.map(lambda x: np.asarray(x[0]), path.branch)
+def _numpy_min_eig(K):
+    return np.linalg.eigvalsh(_reduced(K))[:, 0]
+
+
+def _not_positive_definite(A):
+    """Indices and smallest eigenvalues of the matrices of the stack that are not positive
+    definite (numpy Cholesky of the whole stack first: 10x cheaper than eigenvalues)."""
+    try:
+        np.linalg.cholesky(A)
+        return []
+    except np.linalg.LinAlgError:
+        e = np.linalg.eigvalsh(A)[:, 0]
+        return [(int(i), float(e[i])) for i in np.nonzero(e <= 0)[0]]
+
+
+def _check_walks(walks):
+    """`_check_no_missed_instability` for many walked paths in a few vmapped calls, the
+    eigenvalue tests in numpy. `walks`: (psi0 deg, gap, direction +-1, first-stage branch
+    as numpy arrays, alpha_c in rad or NaN, kind). Also checks each snap's alpha_c is where
+    the walk says: the first loss of stability lies on the last step's arc (ds <= 0.2,
+    |d lam / ds| <= 1), along which lam still grows from the last stable point; a fold is
+    the turn of lam, beyond the last point too."""
+    rows, last, mids = [], [], []  # rows: (psi0 rad, gap, theta, force, lam, lam_mid, label)
+    for psi0, gap, d, b, a, kind in walks:
         n = int(b.count)
-        m = -(-n // pad) * pad
-        idx = np.minimum(np.arange(m), n - 1)
-        nxt = b.lam[np.minimum(idx + 1, n - 1)]
-        K0, K1, ok = jax.device_get(_dense_hessians(sc, b.theta[idx], b.force[idx], b.lam[idx],
-                                                    0.5 * (b.lam[idx] + nxt)))
-        mins = _numpy_min_eig(K0[:n])
-        nm = max(n - 2 if bool(path.snaps) else n - 1, 0)  # midpoints between stable points only
-        assert np.all(ok[:nm]), np.nonzero(~ok[:nm])[0]
-        mids = _numpy_min_eig(K1[:nm])
-        if bool(path.snaps):
-            assert np.all(mins[:-1] > 0) and mins[-1] < 0, mins
-        else:
-            assert np.all(mins > 0), mins
-        assert np.all(mids > 0), mids
+        assert n >= 2, (psi0, gap, d, n)
+        snaps = bool(np.isfinite(a))
+        lam = b.lam[:n]
+        if snaps:
+            assert d * lam[-2] - 1e-9 <= d * a <= d * lam[-2] + 0.2, (psi0, gap, d, a, lam[-2:])
+            assert kind == 2 or (kind == 1 and d * a >= d * lam[-1] - 1e-9), (psi0, gap, d, kind, a, lam[-2:])
+        nm = n - 2 if snaps else n - 1  # midpoints between stable points
+        for i in range(n):
+            row = (np.radians(psi0), gap, b.theta[i], b.force[i], lam[i], 0.5 * (lam[i] + lam[min(i + 1, n - 1)]),
+                   (psi0, gap, d, i))
+            if i < nm:
+                mids.append(len(rows))
+            (last if (snaps and i == n - 1) else rows).append(row)
+    pts = rows + last
+    K0, K1, ok = _dense_hessians_blocks(list(zip(*pts))[:6])
+    mids = np.array(mids, int)
+    label = lambda i: pts[i][6]  # noqa: E731
+    assert np.all(ok[mids]), [label(i) for i in mids[~ok[mids]]]
+    bad = _not_positive_definite(_reduced(K0[:len(rows)]))
+    assert not bad, [(label(i), e) for i, e in bad]
+    bad = _not_positive_definite(_reduced(K1[mids]))
+    assert not bad, [(label(mids[i]), e) for i, e in bad]
+    if last:
+        e = _numpy_min_eig(K0[len(rows):])
+        assert np.all(e < 0), [(label(len(rows) + i), e[i]) for i in np.nonzero(e >= 0)[0]]
+    return len(pts)
+
+
+def _walks_of(r, psi0, gap):
+    """The two walks of a `snap_angles` result, for `_check_walks`."""
+    out = []
+    for d, path in ((1.0, r.up), (-1.0, r.down)):
+        b = jax.tree.map(lambda x: np.asarray(x[0]), path.branch)
+        out.append((psi0, gap, d, b, float(path.alpha_c), int(path.kind)))
+    return out
 
 
 def test_batched_check_agrees_with_the_pointwise_one(snap):
-    """The grid check's batched dense eigenvalues equal the pointwise ones (60 deg, 0.5)."""
-    r, sc = snap(60.0, 0.5), jr.make_scene(60.0, 0.5, 0.0)
+    """The grid checks' batched dense eigenvalues equal the pointwise ones (60 deg, 0.5),
+    and the batched check passes there."""
+    r = snap(60.0, 0.5)
+    sc = jr.make_scene(60.0, 0.5, 0.0)
     b = jax.tree.map(lambda x: np.asarray(x[0]), r.up.branch)
     i = np.array([0, int(b.count) // 2, int(b.count) - 1])
-    K0, _, _ = jax.device_get(_dense_hessians(sc, b.theta[i], b.force[i], b.lam[i], b.lam[i]))
+    K0, _, _ = _dense_hessians_blocks([np.full(3, np.radians(60.0)), np.full(3, 0.5), b.theta[i], b.force[i],
+                                       b.lam[i], b.lam[i]])
     for j, k in enumerate(i):
         e0, _, _ = _dense_min_eig(sc, jnp.asarray(b.theta[k]), jnp.asarray(b.force[k]), jnp.asarray(b.lam[k]),
                                   jnp.asarray(b.lam[k]))
         assert abs(_numpy_min_eig(K0[j:j + 1])[0] - float(e0)) < 1e-8 * max(1.0, abs(float(e0)))
-    _check_no_missed_instability_batched(r, sc)
+    assert _check_walks(_walks_of(r, 60.0, 0.5)) > 10
 
 
-@pytest.mark.slow  # 51.5 s alone (64 s pointwise), most of it the 205 snap_angles; the suite would pass 10 min
+GRID_PSI0 = (30.0, 60.0, 90.0, 120.0, 180.0)
+GRID_GAPS = np.round(np.arange(0.1, 0.9 + 1e-9, 0.02), 10)
+
+
+def test_phase_diagram_walks_miss_no_instability():
+    """No missed branch point (or fold) anywhere on the phase-diagram grid (5 Psi0 x 41
+    gaps, N = 100), on the walks `phase_diagram` itself makes (its warm-started chunks, the
+    walked branches kept): `_check_walks` on every path whose start state exists."""
+    from jaxrod._phase import _chunk
+    from jaxrod._rod import Mesh
+
+    walks = []
+    for psi0 in GRID_PSI0:
+        v = jax.device_get(_chunk(jnp.asarray(np.radians(psi0)), jnp.asarray(GRID_GAPS), jnp.asarray(0.02),
+                                  Mesh(100, 1.0), keep_branch=True))
+        for d, name in ((1.0, "up"), (-1.0, "down")):
+            for j, g in enumerate(GRID_GAPS):
+                if v[f"start_{name}"][j] == int(jr.RESULTS.successful._value):  # else nothing was walked
+                    b = jax.tree.map(lambda x: x[j], v[f"branch_{name}"])
+                    walks.append((psi0, float(g), d, b, np.radians(v[f"alpha_c_{name}"][j]), int(v[f"kind_{name}"][j])))
+    assert len(walks) > 350, len(walks)  # most of the 410 paths exist
+    assert _check_walks(walks) > 4000
+
+
+@pytest.mark.slow  # ~50 s alone, most of it the 205 snap_angles
 def test_no_missed_instability_on_the_phase_diagram_grid(snap):
-    """The same check at every point of the phase-diagram grid (5 Psi0 x 41 gaps, N = 100):
-    no branch point (or fold) is stepped over anywhere on it (pointwise version passed
-    2026-12-02 in 64 s alone; now one vmapped call per path, eigenvalues in numpy)."""
-    for psi0 in (30.0, 60.0, 90.0, 120.0, 180.0):
-        for gap in np.round(np.arange(0.1, 0.9 + 1e-9, 0.02), 10):
-            _check_no_missed_instability_batched(snap(psi0, float(gap)), jr.make_scene(psi0, float(gap), 0.0))
+    """The same check on `snap_angles` (homotopy start states, polished angles) at every
+    point of the phase-diagram grid."""
+    walks = []
+    for psi0 in GRID_PSI0:
+        for gap in GRID_GAPS:
+            walks += _walks_of(snap(psi0, float(gap)), psi0, float(gap))
+    assert _check_walks(walks) > 4000
 
 
 @pytest.mark.parametrize("psi0, gap, s0", [(60.0, 0.05, 0.02), (60.0, 0.95, 0.02), (10.0, 0.5, 0.02),
