@@ -68,8 +68,10 @@ def _snap_record(psi0_deg, gap, n, s0=0.02):
     r = jr.snap_angles(_scene(psi0_deg, gap, n, s0))
     return {"alpha_up": _deg(r.up.alpha_c), "alpha_down": _deg(r.down.alpha_c),
             "kind_up": jr.KIND_NAMES[int(r.up.kind)], "kind_down": jr.KIND_NAMES[int(r.down.kind)],
-            "start_up": str(jr.RESULTS[r.up.result] or "successful"),
-            "start_down": str(jr.RESULTS[r.down.result] or "successful")}
+            "start_up": str(jr.RESULTS[r.up.start_result] or "successful"),
+            "start_down": str(jr.RESULTS[r.down.start_result] or "successful"),
+            "result_up": str(jr.RESULTS[r.up.result] or "successful"),
+            "result_down": str(jr.RESULTS[r.down.result] or "successful")}
 
 
 def _fmt(x, spec="+.2f"):

@@ -350,20 +350,35 @@ def _cmd_snap_angles(args):
         rec[f"kind_{name}"] = jr.KIND_NAMES[int(path.kind)]
         rec[f"fold_height_before_{name}"] = val(path.fold_height_before if e is None else e.fold_height_before)
         rec[f"fold_height_after_{name}"] = val(path.fold_height_after if e is None else e.fold_height_after)
-        rec[f"start_{name}"] = _result_name(path.result)
+        rec[f"start_{name}"] = _result_name(path.start_result)
+        rec[f"result_{name}"] = _result_name(path.result)
         if e is not None:
             rec[f"alpha_c_{name}_deg_n"] = val(e.alpha_c_coarse, deg=True)
             rec[f"alpha_c_{name}_deg_n_fine"] = val(e.alpha_c_fine, deg=True)
             rec[f"error_estimate_{name}_deg"] = val(e.error, deg=True)
             rec[f"meshes_consistent_{name}"] = bool(e.consistent)
+    # a path whose outcome is unknown (its start state missing, the continuation gave up,
+    # the landing failed) is not "does not snap": say so, and exit with EXIT_NOT_CONVERGED
+    paths = [r.up, r.down] + ([] if x is None else [x.coarse.up, x.coarse.down])
+    failed = [_result_name(p.result) for p in paths if _result_name(p.result) != "successful"]
     if args.json:
         print(json.dumps(rec))
     else:
         for name in ("up", "down"):
             a = rec[f"alpha_c_{name}_deg"]
-            print(f"snap {name:<4}: " + ("does not snap" if a is None else
-                  f"alpha_c = {a:+.6f} deg ({rec[f'kind_{name}']}), fold height "
-                  f"{rec[f'fold_height_before_{name}']:+.4f} -> {rec[f'fold_height_after_{name}']:+.4f}"))
+            res = rec[f"result_{name}"]
+            if a is None:
+                text = "does not snap" if res == "successful" else f"unknown ({res})"
+            else:
+                fa = rec[f"fold_height_after_{name}"]
+                text = (f"alpha_c = {a:+.6f} deg ({rec[f'kind_{name}']}), fold height "
+                        f"{rec[f'fold_height_before_{name}']:+.4f} -> "
+                        + (f"{fa:+.4f}" if fa is not None else f"unknown ({res})"))
+            print(f"snap {name:<4}: " + text)
+    if failed:
+        print(f"jaxrod snap-angles: path result {', '.join(sorted(set(failed)))} (see jaxrod.RESULTS)",
+              file=sys.stderr)
+        return EXIT_NOT_CONVERGED
     return EXIT_OK
 
 

@@ -15,6 +15,7 @@ import argparse
 import json
 import math
 import os
+import sys
 
 
 def _fin(x, deg=False):
@@ -43,7 +44,8 @@ def _cmd_hysteresis(args):
         rec[f"fold_height_after_{name}"] = _fin(p.fold_height_after)
         rec[f"bending_energy_before_{name}"] = _fin(eb)
         rec[f"bending_energy_after_{name}"] = _fin(ea)
-        rec[f"start_{name}"] = _result_name(p.result)
+        rec[f"start_{name}"] = _result_name(p.start_result)
+        rec[f"result_{name}"] = _result_name(p.result)
     branches = {}
     for b, bname in enumerate(jr.HYSTERESIS_BRANCHES):
         v = np.asarray(h.valid[b])
@@ -132,11 +134,21 @@ def _cmd_phase_diagram(args):
            "psi0_deg": psis, "gaps": gaps, "s0": args.s0, "n": args.n, "refine": args.refine,
            "computed_chunks": ds.attrs["computed_chunks"], "wall_s": wall, "batch": ds.attrs["batch"],
            "termination_gaps": None if tg is None else {f"{k:g}": [_fin(a) for a in v] for k, v in tg.items()}}
+    # paths whose outcome is unknown although their start state exists (the continuation
+    # gave up, or the landing failed): NaN there does not mean "does not snap"
+    import numpy as np
+
+    ok = int(jr.RESULTS.successful._value)
+    rec["unknown_paths"] = int(sum(np.sum((ds[f"start_{k}"].values == ok) & (ds[f"result_{k}"].values != ok))
+                                   for k in ("up", "down")))
     if args.json:
         print(json.dumps(rec))
     else:
         print(f"wrote {rec['netcdf']} and {png} ({len(psis)} x {len(gaps)} points, {wall:.1f} s; "
               f"{len(rec['computed_chunks'])} chunks computed, the rest resumed)")
+    if rec["unknown_paths"]:
+        print(f"jaxrod phase-diagram: {rec['unknown_paths']} path(s) ended before a loss of stability or the "
+              "bound (result_up/result_down in the NetCDF file)", file=sys.stderr)
     return EXIT_OK
 
 

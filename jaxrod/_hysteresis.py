@@ -97,7 +97,7 @@ def _branches(scene, snap, bound, max_unstable, settings):
     starts_t = jnp.stack([snap.up.branch.theta[0, 0], snap.down.branch.theta[0, 0]])
     starts_m = jnp.stack([snap.up.branch.force[0, 0], snap.down.branch.force[0, 0]])
     starts_l = jnp.stack([snap.up.branch.lam[0, 0], snap.down.branch.lam[0, 0]])
-    ok = jnp.stack([snap.up.result == RESULTS.successful, snap.down.result == RESULTS.successful])
+    ok = jnp.stack([snap.up.start_result == RESULTS.successful, snap.down.start_result == RESULTS.successful])
     idx = jnp.array([0, 0, 1, 1])
     direction = jnp.array([1.0, -1.0, 1.0, -1.0], dtype)
 

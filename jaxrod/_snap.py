@@ -41,6 +41,7 @@ from ._energy.geometry import discretize
 from ._energy.lagrangian import positions
 from ._equilibrium import Newton, _float_scene, solve_equilibrium
 from ._initial import _initial_state
+from ._misc import run_if
 from ._solution import RESULTS, Equilibrium
 from ._stability import mode_parity
 
@@ -77,6 +78,8 @@ class SnapPath(eqx.Module):
     fold_height_after: Array
     branch: object
     result: RESULTS
+    start_result: RESULTS
+    stop: Array
     refine_result: RESULTS | None = None
     mode: Array | None = None
 
@@ -183,15 +186,23 @@ def _path(scene, start_eq, direction, parameter, settings, bound, bisections, to
             # own loss of stability): the post-snap branch of the hysteresis figures
             br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = run(args)
         else:
-            # skip the later stages of a path that has snapped (a real branch outside vmap)
+            # skip the later stages of a path that has been decided: `run_if`, a loop of at most
+            # one pass, not `lax.cond`, which under `vmap` (a batched `done`) would run the whole
+            # stage for every member at every stage (2x the continuation work of a phase diagram)
             shapes = jax.eval_shape(run, args)
-            skip = lambda _: jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)  # noqa: E731
-            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = lax.cond(done, skip, run, args)
+            skipped = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = run_if(
+                ~done, lambda sc, d, a: _stage(sc, parameter, *a, d, settings, bound, bisections, tol), skipped,
+                (scene, direction, args))
         w = discretize(scene).h
         dist = jnp.sqrt(jnp.sum(w * (ta - t) ** 2))
         jumped = snaps & (dist > JUMP_DISTANCE) & landed
-        final = ~done & (~snaps | jumped)
-        new_out = (snaps, kind, t, m, lam, fb, ta, ma, fa)
+        # the path is decided here if it did not lose stability (bound reached, start
+        # missing, or the continuation gave up: `stop` tells which), if it jumped, or if it
+        # lost stability but the relaxation past alpha_c found no equilibrium (`landed`
+        # False: a loss of stability all the same, whose landing is unknown)
+        final = ~done & (~snaps | jumped | ~landed)
+        new_out = (snaps, kind, t, m, lam, fb, ta, ma, fa, br.stop, landed)
         out = jax.tree.map(lambda n, o: jnp.where(final, n, o), new_out, out)
         lam_next = lam + direction * 1e-3
         nxt = (ta, ma, lam_next, ok & snaps & landed, done | final, out)
@@ -200,13 +211,21 @@ def _path(scene, start_eq, direction, parameter, settings, bound, bisections, to
     dtype = start_eq.theta.dtype
     nan = jnp.full((), jnp.nan, dtype)
     out0 = (jnp.zeros((), bool), jnp.zeros((), jnp.int32), start_eq.theta, start_eq.force, nan, nan,
-            start_eq.theta, start_eq.force, nan)
+            start_eq.theta, start_eq.force, nan, jnp.full((), -1, jnp.int32), jnp.ones((), bool))
     lam0 = parameter.get(start_eq.scene)
     ok0 = start_eq.result == RESULTS.successful
     init = (start_eq.theta, start_eq.force, jnp.asarray(lam0, dtype), ok0, jnp.zeros((), bool), out0)
     (_, _, _, _, done, out), branches = lax.scan(body, init, None, length=stages)
-    snaps, kind, t, m, lam, fb, ta, ma, fa = out
+    snaps, kind, t, m, lam, fb, ta, ma, fa, stop, landed = out
     snaps = snaps & done
+    # decided without a snap, but not at the parameter bound (stop 1): the continuation
+    # gave up (buffer full, step too small); or never decided (every stage supercritical)
+    incomplete = ~done | (~snaps & (stop != 1))
+    result = RESULTS.where(
+        ~ok0, start_eq.result,
+        RESULTS.where(incomplete, RESULTS.continuation_incomplete,
+                      RESULTS.where(snaps & ~landed, RESULTS.landing_failed, RESULTS.successful)))
+    lost = snaps & ~landed  # no landed state: NaN rather than the failed relaxation's iterate
     return SnapPath(
         snaps=snaps,
         alpha_c=jnp.where(snaps, lam, nan),
@@ -214,11 +233,13 @@ def _path(scene, start_eq, direction, parameter, settings, bound, bisections, to
         theta_before=t,
         force_before=m,
         fold_height_before=jnp.where(snaps, fb, nan),
-        theta_after=ta,
-        force_after=ma,
-        fold_height_after=jnp.where(snaps, fa, nan),
+        theta_after=jnp.where(lost, nan, ta),
+        force_after=jnp.where(lost, nan, ma),
+        fold_height_after=jnp.where(snaps & landed, fa, nan),
         branch=branches,
-        result=start_eq.result,
+        result=result,
+        start_result=start_eq.result,
+        stop=stop,
     )
 
 
@@ -284,14 +305,14 @@ def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, cont
         # prev: what the snap-down path left for the snap-up start (see below)
         lam_end, t_end, m_end, down_snaps, down_alpha, t_after, m_after = prev
 
-        def up_start():
+        def up_start(scene, lam_end, t_end, m_end, down_snaps, down_alpha, t_after, m_after):
             alt_eq = solve_equilibrium(parameter.set(scene, lam_end), t_end, m_end)
             land_eq = solve_equilibrium(parameter.set(scene, down_alpha - 1e-3), t_after, m_after)
             return jax.tree.map(lambda c, b: jnp.where(down_snaps, c, b), arrays(land_eq), arrays(alt_eq))
 
         has_down = down_eq.result == RESULTS.successful
         need_alt = (direction > 0) & ~has_down
-        alt = lax.cond(need_alt, up_start, lambda: arrays(down_eq))
+        alt = run_if(need_alt, up_start, arrays(down_eq), (scene,) + prev)  # not lax.cond: see `run_if`
         start = jax.tree.map(lambda u, d, a: jnp.where(direction < 0, u, jnp.where(has_down, d, a)),
                              arrays(up_eq), arrays(down_eq), alt)
         path = _path(scene, eqx.combine(start, static), direction, parameter, settings, bound, bisections, tol,

@@ -17,6 +17,15 @@ class RESULTS(eqx.Enumeration):
     line_search_failed = "The line search found no decrease of the merit function (diverged)."
     converged_to_saddle = "Newton converged to an equilibrium that is not a local minimum."
     state_not_found = "The requested state (up/down) does not exist here as a stable equilibrium."
+    continuation_incomplete = (
+        "The continuation ended before a loss of stability or the parameter bound (buffer full, step below "
+        "ds_min, or more supercritical stages than allowed): whether the path snaps is unknown; raise "
+        "Continuation(max_points=...) or lower ds_min."
+    )
+    landing_failed = (
+        "The strip loses stability at alpha_c, but relaxing it past alpha_c found no equilibrium: the state "
+        "it lands in is unknown."
+    )
 
 
 class Equilibrium(eqx.Module):

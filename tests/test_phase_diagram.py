@@ -21,7 +21,7 @@ def _fake_chunk(calls):
         g = np.asarray(gaps)
         p = float(psi0)
         out = {k: np.sin(p * (i + 1) + 3.0 * g) for i, k in enumerate(_phase.VARIABLES)}
-        for k in ("kind_up", "kind_down", "start_up", "start_down"):
+        for k in ("kind_up", "kind_down", "start_up", "start_down", "result_up", "result_down"):
             out[k] = (np.arange(g.size) % 3).astype(np.int32)
         out["alpha_c_down"][0] = np.nan  # a point that does not snap
         return out
@@ -139,7 +139,8 @@ def test_warm_started_chunk_equals_single_calls(tmp_path):
                 a, b = at("alpha_c"), float(np.degrees(path.alpha_c))
                 assert (np.isnan(a) and np.isnan(b)) or abs(a - b) < 1e-6, (p, g, name, a, b)
                 assert int(at("kind")) == int(path.kind), (p, g, name)
-                assert int(at("start")) == int(path.result._value), (p, g, name)
+                assert int(at("start")) == int(path.start_result._value), (p, g, name)
+                assert int(at("result")) == int(path.result._value), (p, g, name)
                 fa, fb = at("fold_height_after"), float(path.fold_height_after)
                 assert (np.isnan(fa) and np.isnan(fb)) or abs(fa - fb) < 1e-6, (p, g, name, fa, fb)
     warm = ds["warm_starts"]

@@ -36,6 +36,8 @@ def test_paper_asymmetry_60_05(snap):
     up, down = np.degrees(float(r.up.alpha_c)), np.degrees(float(r.down.alpha_c))
     assert up > 0 > down
     assert up < abs(down)  # the paper: snap up at ~73.6 deg, snap down at ~ -80 deg
+    for p in (r.up, r.down):  # decided by a loss of stability (Branch.stop 2), landed
+        assert int(p.stop) == 2 and p.result == jr.RESULTS.successful
     # snapping up lands in the up state, snapping down in the down state
     assert float(r.up.fold_height_after) > 0 and float(r.down.fold_height_after) < 0
 
@@ -44,6 +46,8 @@ def test_no_snap_30_08(snap):
     r = snap(30.0, 0.8)  # the paper's Fig. 2b: smooth in both directions
     assert not bool(r.up.snaps) and not bool(r.down.snaps)
     assert np.isnan(float(r.up.alpha_c)) and int(r.up.kind) == 0
+    for p in (r.up, r.down):  # a genuine "does not snap": the path reached |alpha| = pi (stop 1)
+        assert int(p.stop) == 1 and p.result == jr.RESULTS.successful
 
 
 def test_alpha_c_brackets_stability_loss(snap):
@@ -92,3 +96,59 @@ def test_cli_snap_angles_json(snap, capsys):
     assert main(["snap-angles", "--psi0", "30", "--gap", "0.8", "--json"]) == 0
     rec = json.loads(capsys.readouterr().out)
     assert rec["alpha_c_up_deg"] is None and rec["kind_up"] == "none"
+    assert rec["result_up"] == "successful" and rec["result_down"] == "successful"
+
+
+def test_continuation_that_gives_up_is_not_a_silent_no_snap():
+    """A path whose continuation stops before a loss of stability or the bound |alpha| = pi
+    (buffer full: stop 0; step below ds_min: stop 3) has an unknown outcome: it must say so
+    through `result`, not read as "does not snap" with a successful code."""
+    sc = jr.make_scene(60.0, 0.5, 0.0, n=40)
+    # (the successful paths, stop 2 and stop 1, are checked in the two tests above)
+    for settings, polish, stop in ((jr.Continuation(max_points=3), True, 0),  # compiled as the CLI test's
+                                   (jr.Continuation(ds=0.05, ds_min=0.1), False, 3)):
+        r = jr.snap_angles(sc, settings=settings, polish=polish)
+        for p in (r.up, r.down):
+            assert int(p.stop) == stop
+            assert p.result == jr.RESULTS.continuation_incomplete
+            assert p.start_result == jr.RESULTS.successful  # the start state itself is fine
+            assert not bool(p.snaps) and np.isnan(float(p.alpha_c)) and int(p.kind) == 0
+
+
+def test_failed_landing_is_reported_not_dropped(snap, monkeypatch):
+    """Where the strip loses stability but the relaxation past alpha_c finds no
+    equilibrium, the loss of stability stands (alpha_c, kind) and `result` says the
+    landing failed; before, the path went on to a second stage and read as no snap."""
+    from jaxrod import _snap
+
+    real = _snap._land
+
+    def no_landing(*args):
+        t, m, fa, eq = real(*args)
+        return t, m, fa, eqx.tree_at(lambda e: e.result, eq, jr.RESULTS.max_steps_reached)
+
+    sc = jr.make_scene(60.0, 0.5, 0.0)
+    ref = snap(60.0, 0.5)
+    monkeypatch.setattr(_snap, "_land", no_landing)
+    r = jax.jit(lambda s: _snap.snap_angles(s, settings=jr.Continuation(ds=0.0501)))(sc)  # a fresh trace
+    for p, q in ((r.up, ref.up), (r.down, ref.down)):
+        assert p.result == jr.RESULTS.landing_failed and p.start_result == jr.RESULTS.successful
+        assert bool(p.snaps) and int(p.kind) == int(q.kind)
+        assert abs(float(p.alpha_c) - float(q.alpha_c)) < 1e-7
+        assert np.isnan(float(p.fold_height_after)) and np.all(np.isnan(np.asarray(p.theta_after)))
+
+
+def test_cli_snap_angles_reports_an_unknown_path(monkeypatch, capsys):
+    """The CLI exits with 3 and names the result where a path's outcome is unknown."""
+    import json
+
+    from jaxrod import _cli
+
+    real = jr.snap_angles
+    monkeypatch.setattr(jr, "snap_angles", lambda sc, **kw: real(sc, settings=jr.Continuation(max_points=3), **kw))
+    assert _cli.main(["snap-angles", "--psi0", "60", "--gap", "0.5", "--n", "40", "--json", "--no-extrapolate"]) == 3
+    cap = capsys.readouterr()
+    rec = json.loads(cap.out)
+    assert rec["result_up"] == "continuation_incomplete" and rec["alpha_c_up_deg"] is None
+    assert rec["start_up"] == "successful"
+    assert "continuation_incomplete" in cap.err
