@@ -95,7 +95,11 @@ def main(argv=None):
     ratio = rows[1]["run_s"] / rows[0]["run_s"]
     res = dict(meta=meta, runs=rows, vmap_over_scan_time=ratio, max_abs_difference=diff, same_pattern=same,
                snaps_up=int(np.isfinite(a["alpha_c_up"].values).sum()),
-               snaps_down=int(np.isfinite(a["alpha_c_down"].values).sum()))
+               snaps_down=int(np.isfinite(a["alpha_c_down"].values).sum()),
+               # paths whose whole-path result (SnapPath.result) is not successful, e.g.
+               # continuation_incomplete: their NaN angles would not mean "does not snap"
+               paths_not_successful=int(sum((a[f"result_{k}"].values != 0).sum() for k in ("up", "down"))),
+               paths=2 * len(psis) * len(gaps))
     outdir = Path(args.out)
     outdir.mkdir(parents=True, exist_ok=True)
     name = "phase" + ("_quick" if args.quick else "") + ("" if dev.platform == "cpu" else f"_{dev.platform}")
@@ -106,7 +110,8 @@ def main(argv=None):
          f"OPENBLAS_NUM_THREADS={meta['openblas_threads']}; load average {meta['load_average_start'][0]:.2f} / "
          f"{meta['load_average_end'][0]:.2f}.", "",
          f"Grid: Psi0 = {', '.join(f'{p:g}' for p in psis)} deg x {len(gaps)} gaps G/L = {gaps[0]:g}..{gaps[-1]:g}, "
-         f"N = {args.n}, s0 = 0.02; both paths; {res['snaps_up']} snap-up and {res['snaps_down']} snap-down points.", "",
+         f"N = {args.n}, s0 = 0.02; both paths; {res['snaps_up']} snap-up and {res['snaps_down']} snap-down points; "
+         f"paths whose result is not successful: {res['paths_not_successful']} of {res['paths']}.", "",
          "| `batch` | what | first call (s) | run (s, median) | per scene (ms) |", "|---|---|---:|---:|---:|"]
     what = {"scan": "one jitted `lax.scan` over the gaps per Psi0", "vmap": "all Psi0 in one jitted call (`vmap` over Psi0)"}
     for r in rows:
@@ -118,7 +123,9 @@ def main(argv=None):
           f"**{all(same.values())}**.", "",
           "On a CPU `batch=\"auto\"` uses `scan`: batched, every loop runs as long as its slowest member and does "
           "every member's work, so vectorizing 5 members buys nothing on 2 cores. The vmapped call is the "
-          "mode for accelerators."]
+          "mode for accelerators. (Before `run_if`'s optimization barrier and `run_if_each`, 2026-12-03, XLA "
+          "hoisted the homotopy out of its one-pass loop and the vmapped call ran it for every member at every "
+          "gap: 21.8 s against 4.77 s for `scan` in one run on the same machine.)"]
     (outdir / f"{name}.md").write_text("\n".join(L) + "\n")
     print("\n".join(L))
 

@@ -32,6 +32,7 @@ from jax import lax
 from . import _kkt
 from ._energy.geometry import discretize, scene_dtype
 from ._energy.lagrangian import lagrangian
+from ._misc import run_if
 from ._solution import RESULTS, Equilibrium
 
 
@@ -104,14 +105,29 @@ def _newton(scene, theta0, mu0, solver: Newton):
                 scale = jnp.max(jnp.abs(K.diag))
                 floor = 1e-8 * scale
 
-                def ladder():
+                def ladder(K, scale, floor):
+                    # the smallest rung delta with nu(floor - delta) = 0 (else the last), one
+                    # rung after the other: the same counts as one 13-shift Sturm count, but
+                    # under `vmap` each rung is one small batched solve per member instead of a
+                    # 13x wider one (which went to `_linalg`'s slow pivoting scan)
                     deltas = scale * _DELTAS.astype(dtype)
-                    ok = _kkt.count_below(K, floor - deltas) == 0
-                    return jnp.where(jnp.any(ok), deltas[jnp.argmax(ok)], deltas[-1])
 
-                # the ladder of shifts is only needed away from a local minimum
+                    def ok_at(j):
+                        return _kkt.count_below(K, (floor - deltas[j])[None])[0] == 0
+
+                    def more(c):
+                        return ~c[1] & (c[0] < deltas.shape[0] - 1)
+
+                    j, _ = lax.while_loop(more, lambda c: (c[0] + 1, ok_at(c[0] + 1)),
+                                          (jnp.zeros((), jnp.int32), ok_at(0)))
+                    return deltas[j]
+
+                # the ladder of shifts is only needed away from a local minimum; `run_if`, not
+                # `lax.cond`: under `vmap` a cond would run the 13-shift ladder for every member
+                # at every iteration (a batched tridiagonal solve per shift: it dominated the
+                # vmapped phase diagram)
                 is_min = _kkt.count_below(K, jnp.full((1,), floor, dtype))[0] == 0
-                delta = lax.cond(is_min, lambda: jnp.zeros((), dtype), ladder)
+                delta = run_if(~is_min, ladder, jnp.zeros((), dtype), (K, scale, floor))
             else:
                 delta = jnp.zeros((), dtype)
             p, q = _kkt.solve(K, -g[0], -g[1], shift=-delta)

@@ -23,13 +23,19 @@ NaN angles there and does not affect the others.
 grid in a single jitted call, `vmap` over $\Psi_0$ of the same scan over the gaps (same
 warm starts, same per-gap result codes). Batched, each loop runs as long as its slowest
 member and does every member's work, and an `lax.cond` on a batched predicate would run
-both branches; the homotopy fallback is therefore a while loop of at most one pass
-(`_run_if`), which under `vmap` runs only when some member needs it. On XLA:CPU the
-batched linear algebra goes through `jaxrod._linalg` (batched LAPACK calls inside the
-loops had deadlocked 2-core machines). Measured on 2 CPU cores the sequential chunks are
-faster than the vmapped call (3.19 s vs 13.8 s for 5 x 41 at N = 100;
-`benchmarks/bench_phase.py` times both side by side), so
-`batch="auto"` picks `"scan"` (one call per $\Psi_0$) on the CPU and `"vmap"` elsewhere.
+both branches. So the warm-start Newton, the Newton's inertia-correction ladder and the
+later stages of a snap path are loops of at most one pass (`jaxrod._misc.run_if`), which
+under `vmap` run only when some member needs them, with their inputs passed through an
+optimization barrier (without it XLA hoisted the work out of the loop and ran it every
+time); the homotopy fallback, which at a given gap one member of the grid needs (the one
+whose state stopped existing), runs member by member through real conds
+(`jaxrod._misc.run_if_each`). On XLA:CPU the batched linear algebra goes through
+`jaxrod._linalg` (batched LAPACK calls inside the loops had deadlocked 2-core machines).
+Measured on 2 CPU cores (`benchmarks/bench_phase.py`, both side by side, 5 x 41 at
+N = 100): the vmapped call 5.39 s, the sequential chunks 4.45 s (it was 21.8 s vs 4.77 s
+before those changes, the homotopy running for all members at every gap), so
+`batch="auto"` still picks `"scan"` (one call per $\Psi_0$) on the CPU and `"vmap"`
+elsewhere.
 
 With `out`, each finished chunk is written to `out/chunks/psi0_<deg>.nc` (NetCDF3 via
 scipy) and the run is resumable: a chunk whose file exists with the same grid, $s_0$
@@ -52,14 +58,14 @@ from jax import lax
 from ._continuation import Continuation, SymmetricAlpha
 from ._equilibrium import _float_scene, solve_equilibrium
 from ._initial import _initial_state, _tracked
-from ._misc import check_param
+from ._misc import check_param, run_if as _run_if, run_if_each
 from ._rod import Clamps, Mesh, Scene, Strip
 from ._snap import _snap_angles_from
 from ._solution import RESULTS
 
 VARIABLES = ("alpha_c_up", "alpha_c_down", "kind_up", "kind_down", "fold_height_before_up",
              "fold_height_after_up", "fold_height_before_down", "fold_height_after_down",
-             "start_up", "start_down", "warm_starts")
+             "start_up", "start_down", "result_up", "result_down", "warm_starts")
 
 
 def _warm_or_homotopy(scene, sgn, t_prev, m_prev, ok_prev):
@@ -75,28 +81,20 @@ def _warm_or_homotopy(scene, sgn, t_prev, m_prev, ok_prev):
     arrays = lambda e: eqx.filter(e, eqx.is_array)  # noqa: E731
     zeros = lambda: jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)  # noqa: E731
 
-    def warm():
+    def warm(scene, sgn, t_prev, m_prev):
         eq = solve_equilibrium(scene, t_prev, m_prev)
         return _tracked(eq, sgn, t_prev, scene), jax.tree.map(lambda x, s: jnp.asarray(x, s.dtype), arrays(eq), shapes)
 
-    good, eq_w = _run_if(ok_prev, warm, (jnp.zeros((), bool), zeros()))
-    eq = _run_if(~good, lambda: arrays(_initial_state(scene, sgn)), eq_w)
+    # (everything the two branches use goes in as `run_if` operands: see its docstring)
+    good, eq_w = _run_if(ok_prev, warm, (jnp.zeros((), bool), zeros()), (scene, sgn, t_prev, m_prev))
+    # the homotopy (~35 ms a state at N = 100) one member after another under `vmap`: at most
+    # a few members of the vmapped grid need it at a gap (the one whose state stopped existing)
+    eq = run_if_each(~good, lambda sc, sg: arrays(_initial_state(sc, sg)), eq_w, (scene, sgn))
     return eqx.combine(eq, static), good
 
 
-def _run_if(pred, fn, default):
-    """`fn()` where `pred`, else `default` (same structure). A while loop of at most one
-    pass rather than `lax.cond`: unbatched the two are the same, but under `vmap` a cond
-    on a batched predicate becomes a select that runs `fn` for every member every time,
-    while this loop runs it only when some member needs it (masked for the others)."""
-    def body(c):
-        return jnp.zeros((), bool), fn()
-
-    return lax.while_loop(lambda c: c[0], body, (jnp.asarray(pred, bool), default))[1]
-
-
 @eqx.filter_jit
-def _chunk(psi0, gaps, s0, mesh, keep_branch=False):
+def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation()):
     """All gaps at one fold angle (rad), one gap after the other (`lax.scan`): the start
     states of each gap by Newton from the previous gap's (homotopy where that fails), then
     `snap_angles` from them without the extended-system polish (bisection values) and
@@ -121,14 +119,15 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False):
 
         eqs, warmed = lax.map(start, (jnp.asarray([1.0, -1.0], dtype), t_prev, m_prev, ok_prev))
         starts = eqx.combine(eqs, static)
-        r = _snap_angles_from(scene, starts, Continuation(), jnp.pi, 24, False, continue_after_snap=False)
+        r = _snap_angles_from(scene, starts, settings, jnp.pi, 24, False, continue_after_snap=False)
         out = {}
         for name, p in (("up", r.up), ("down", r.down)):
             out[f"alpha_c_{name}"] = jnp.degrees(p.alpha_c)
             out[f"kind_{name}"] = p.kind.astype(jnp.int32)
             out[f"fold_height_before_{name}"] = p.fold_height_before
             out[f"fold_height_after_{name}"] = p.fold_height_after
-            out[f"start_{name}"] = p.result._value.astype(jnp.int32)
+            out[f"start_{name}"] = p.start_result._value.astype(jnp.int32)
+            out[f"result_{name}"] = p.result._value.astype(jnp.int32)
         out["warm_starts"] = warmed.astype(jnp.int32).sum()
         if keep_branch:
             for name, p in (("up", r.up), ("down", r.down)):
@@ -140,9 +139,9 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False):
 
 
 @eqx.filter_jit
-def _grid(psis, gaps, s0, mesh):
+def _grid(psis, gaps, s0, mesh, settings=Continuation()):
     """All chunks in one call: `vmap` over the fold angles (rad) of `_chunk`."""
-    return jax.vmap(lambda p: _chunk(p, gaps, s0, mesh))(psis)
+    return jax.vmap(lambda p: _chunk(p, gaps, s0, mesh, settings=settings))(psis)
 
 
 def _resolve_batch(batch):
@@ -211,7 +210,8 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     **Returns:** dataset with dims `(psi0, gap)`: `alpha_c_up`, `alpha_c_down` (degrees,
     NaN where the path does not snap), `kind_up`/`kind_down` (0 none, 1 fold, 2 branch
     point), fold heights before/after each snap, `start_up`/`start_down` (RESULTS codes of
-    the start states), `warm_starts` (how many of the two start states came from the
+    the start states), `result_up`/`result_down` (RESULTS codes of the whole paths, as
+    `SnapPath.result`: not successful where NaN angles do not mean "does not snap"), `warm_starts` (how many of the two start states came from the
     previous gap, see the module docstring); attribute `computed_chunks` lists the $\Psi_0$ computed by this call
     (the others were read back from `out`), `batch` the mode used. Needs float64.
     """
