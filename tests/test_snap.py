@@ -105,9 +105,9 @@ def test_continuation_that_gives_up_is_not_a_silent_no_snap():
     through `result`, not read as "does not snap" with a successful code."""
     sc = jr.make_scene(60.0, 0.5, 0.0, n=40)
     # (the successful paths, stop 2 and stop 1, are checked in the two tests above)
-    for settings, polish, stop in ((jr.Continuation(max_points=3), True, 0),  # compiled as the CLI test's
-                                   (jr.Continuation(ds=0.05, ds_min=0.1), False, 3)):
-        r = jr.snap_angles(sc, settings=settings, polish=polish)
+    for settings, stop in ((jr.Continuation(max_points=3), 0),  # the same compilation as the CLI test's
+                           (jr.Continuation(ds=0.05, ds_min=0.1), 3)):
+        r = jr.snap_angles(sc, settings=settings, polish=False)
         for p in (r.up, r.down):
             assert int(p.stop) == stop
             assert p.result == jr.RESULTS.continuation_incomplete
@@ -145,7 +145,8 @@ def test_cli_snap_angles_reports_an_unknown_path(monkeypatch, capsys):
     from jaxrod import _cli
 
     real = jr.snap_angles
-    monkeypatch.setattr(jr, "snap_angles", lambda sc, **kw: real(sc, settings=jr.Continuation(max_points=3), **kw))
+    monkeypatch.setattr(jr, "snap_angles",
+                        lambda sc, **kw: real(sc, settings=jr.Continuation(max_points=3), polish=False, **kw))
     assert _cli.main(["snap-angles", "--psi0", "60", "--gap", "0.5", "--n", "40", "--json", "--no-extrapolate"]) == 3
     cap = capsys.readouterr()
     rec = json.loads(cap.out)
