@@ -176,24 +176,22 @@ def _path(scene, start_eq, direction, parameter, settings, bound, bisections, to
     state, up to `stages` times."""
     def body(c, _):
         t0, m0, lam0, ok, done, out = c
-        def run(args):
+        def run(sc, d, args):
             t0, m0, lam0, ok0 = args
-            return _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bisections, tol)
+            return _stage(sc, parameter, t0, m0, lam0, ok0, d, settings, bound, bisections, tol)
 
         args = (t0, m0, lam0, ok & ~done)
         if continue_after_snap:
             # after a snap the next stage follows the landed branch (to |alpha| = bound or its
             # own loss of stability): the post-snap branch of the hysteresis figures
-            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = run(args)
+            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = run(scene, direction, args)
         else:
             # skip the later stages of a path that has been decided: `run_if`, a loop of at most
             # one pass, not `lax.cond`, which under `vmap` (a batched `done`) would run the whole
             # stage for every member at every stage (2x the continuation work of a phase diagram)
-            shapes = jax.eval_shape(run, args)
+            shapes = jax.eval_shape(lambda a: run(scene, direction, a), args)
             skipped = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
-            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = run_if(
-                ~done, lambda sc, d, a: _stage(sc, parameter, *a, d, settings, bound, bisections, tol), skipped,
-                (scene, direction, args))
+            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = run_if(~done, run, skipped, (scene, direction, args))
         w = discretize(scene).h
         dist = jnp.sqrt(jnp.sum(w * (ta - t) ** 2))
         jumped = snaps & (dist > JUMP_DISTANCE) & landed
