@@ -65,7 +65,8 @@ def plot_snap(traj, out_dir, *, title=""):
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.plot(t, np.asarray(traj.bending)[ok], label="bending E_b")
     ax.plot(t, np.asarray(traj.kinetic)[ok], label="kinetic E_k")
-    ax.plot(t, (np.asarray(traj.kinetic) + np.asarray(traj.potential) - np.asarray(traj.clamp_work))[ok],
+    # mask first: unused save slots hold inf/NaN, and inf - inf would warn
+    ax.plot(t, np.asarray(traj.kinetic)[ok] + np.asarray(traj.potential)[ok] - np.asarray(traj.clamp_work)[ok],
             "k--", lw=0.8, label="E_k + V - W_clamps")
     ax.set_xlabel("t / T")
     ax.set_ylabel("energy / (B/L)")

@@ -44,7 +44,9 @@ def tmp(tmp_path_factory):
 def runs(tmp):
     """The solving CLI calls, run one after another in a background thread (sharing a
     compilation cache) while the tests compute reference values in-process."""
-    env = dict(os.environ, JAX_COMPILATION_CACHE_DIR=str(tmp / "jax-cache"))
+    env = dict(os.environ)
+    if "JAXROD_NO_CACHE" not in env:
+        env["JAX_COMPILATION_CACHE_DIR"] = str(tmp / "jax-cache")
     jobs = {
         "demo": ["demo", "--out", str(tmp / "demo")],
         "down": ["equilibrium", *SCENE, "--state", "down", "--json", "--plot", str(tmp / "plots" / "down.png")],
