@@ -18,14 +18,16 @@ alone at the end."""
 import os
 
 XLA_CACHE = os.environ.get("JAXROD_TEST_XLA_CACHE", "0") == "1"
-if not XLA_CACHE:
-    os.environ.pop("JAX_COMPILATION_CACHE_DIR", None)
-    os.environ["JAXROD_NO_CACHE"] = "1"  # the CLI subprocesses' own cache, too
-os.environ.setdefault(
-    "JAX_COMPILATION_CACHE_DIR",
-    os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "jaxrod", "xla"),
-)
-os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.3")
+if XLA_CACHE:
+    os.environ.setdefault(
+        "JAX_COMPILATION_CACHE_DIR",
+        os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "jaxrod", "xla"),
+    )
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.3")
+    os.makedirs(os.environ["JAX_COMPILATION_CACHE_DIR"], exist_ok=True)
+else:
+    os.environ.pop("JAX_COMPILATION_CACHE_DIR", None)  # child processes read it too
+    os.environ["JAXROD_NO_CACHE"] = "1"  # the CLI subprocesses' own cache
 # JAX does not persist a program with host callbacks, and equinox's runtime checks
 # (`eqx.error_if`, raised through a callback by default) are callbacks: diffrax checks its
 # save times that way, which kept every `jaxrod.simulate` program out of the cache. Those
@@ -40,10 +42,6 @@ os.environ.setdefault("EQX_ON_ERROR", "nan")
 # benchmarks and users run at XLA's default level.
 if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0").strip()
-if XLA_CACHE:
-    os.makedirs(os.environ["JAX_COMPILATION_CACHE_DIR"], exist_ok=True)
-else:
-    os.environ.pop("JAX_COMPILATION_CACHE_DIR")
 
 import jax  # noqa: E402
 
@@ -68,7 +66,7 @@ def pytest_configure(config):
     # pytest-xdist <= 3.8 puts the dead worker's finished tests back on the queue and the
     # replacement waits forever (pytest-xdist#1323); one CI run hung that way for the whole
     # of its time limit. With no restart the run stops at once and names the test.
-    if getattr(config.option, "maxworkerrestart", None) is None and hasattr(config.option, "maxworkerrestart"):
+    if hasattr(config.option, "maxworkerrestart") and config.option.maxworkerrestart is None:
         config.option.maxworkerrestart = 0
 
 

@@ -43,7 +43,8 @@ def tmp(tmp_path_factory):
 @pytest.fixture(scope="module")
 def runs(tmp):
     """The solving CLI calls, run one after another in a background thread (sharing a
-    compilation cache) while the tests compute reference values in-process."""
+    compilation cache when the suite's is on, see conftest.py) while the tests compute
+    reference values in-process."""
     env = dict(os.environ)
     if "JAXROD_NO_CACHE" not in env:
         env["JAX_COMPILATION_CACHE_DIR"] = str(tmp / "jax-cache")
