@@ -11,10 +11,21 @@ so it is rare and not reproducible here), and a crash fails the run. CI uses the
 The environment variables are set before jax and equinox are imported so that child
 processes inherit them.
 
+Compiled programs are released between modules once a worker holds many: every XLA:CPU
+executable keeps about ten memory mappings (its code and data sections) for as long as JAX's
+caches hold it, and a worker that runs a few thousand programs nears the kernel's per-process
+limit (`vm.max_map_count`, 65530 by default). Past it an mmap fails inside XLA and the
+worker dies of a segfault: two CI runs did (in `deserialize_executable`, then compiling in
+test_phase_diagram, 99 % through), and a fresh-clone run here measured a worker at 10,600
+mappings eight minutes in. `_release_compiled_programs` calls `jax.clear_caches()` after any
+module that leaves the worker above a third of the limit (`JAXROD_TEST_MAP_LOG=FILE` logs
+the count before and after each module).
+
 The slowest modules are scheduled first (`pytest_collection_modifyitems`), so that under
 `-n 2` the two workers finish at about the same time instead of one running a long module
 alone at the end."""
 
+import gc
 import os
 
 XLA_CACHE = os.environ.get("JAXROD_TEST_XLA_CACHE", "0") == "1"
@@ -44,12 +55,54 @@ if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0").strip()
 
 import jax  # noqa: E402
+import pytest  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 if XLA_CACHE:
     jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
     jax.config.update("jax_persistent_cache_min_compile_time_secs",
                       float(os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"]))
+
+
+def map_count():
+    """Memory mappings of this process (lines of /proc/self/maps); None off Linux."""
+    try:
+        with open("/proc/self/maps", "rb") as f:
+            return sum(1 for _ in f)
+    except OSError:
+        return None
+
+
+def map_limit():
+    """The kernel's per-process mapping limit (vm.max_map_count), 65530 where unreadable."""
+    try:
+        with open("/proc/sys/vm/max_map_count") as f:
+            return int(f.read())
+    except (OSError, ValueError):
+        return 65530
+
+
+def release_compiled_programs(threshold):
+    """`jax.clear_caches()` when this process holds more than `threshold` mappings; returns
+    (mappings before, mappings after), or None when nothing was released."""
+    before = map_count()
+    if before is None or before <= threshold:
+        return None
+    jax.clear_caches()
+    gc.collect()
+    return before, map_count()
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_programs(request):
+    start = map_count()
+    yield
+    end = map_count()
+    released = release_compiled_programs(map_limit() // 3)
+    log = os.environ.get("JAXROD_TEST_MAP_LOG")  # one line per module: for diagnosis
+    if log:
+        with open(log, "a") as f:
+            f.write(f"{os.getpid()} {request.module.__name__} {start} {end} {released}\n")
 
 
 def pytest_configure(config):
