@@ -4,22 +4,25 @@ XLA compilation cache unless asked for, and the slowest modules first.
 Persistent cache: off by default. With it on (JAXROD_TEST_XLA_CACHE=1), the xdist workers,
 the notebook kernels and the CLI subprocesses share JAX's persistent cache (by default the
 CLI's `~/.cache/jaxrod/xla`; JAX_COMPILATION_CACHE_DIR picks another): a fresh-clone run
-took 1419 s instead of 1829 s (2026-12-03, same 2-core machine), and a warm rerun 670 s. But
-one CI run died of a segfault inside XLA's `deserialize_executable` reading that cache
-(jaxlib 0.10.2; 792 deserializations of the same entries in a stress loop never crashed,
-so it is rare and not reproducible here), and a crash fails the run. CI uses the default.
+took 1419 s instead of 1829 s (2026-12-03, same 2-core machine), and a warm rerun 670 s.
+It was turned off after a CI run died of a segfault inside XLA's `deserialize_executable`
+reading it; that crash turned out to be the mapping limit below, not the cache (reading
+cached programs at a lowered `vm.max_map_count` segfaults in the same frame), but CI keeps
+the configuration that was verified end to end without it.
 The environment variables are set before jax and equinox are imported so that child
 processes inherit them.
 
 Compiled programs are released between modules once a worker holds many: every XLA:CPU
-executable keeps about ten memory mappings (its code and data sections) for as long as JAX's
-caches hold it, and a worker that runs a few thousand programs nears the kernel's per-process
-limit (`vm.max_map_count`, 65530 by default). Past it an mmap fails inside XLA and the
-worker dies of a segfault: two CI runs did (in `deserialize_executable`, then compiling in
-test_phase_diagram, 99 % through), and a fresh-clone run here measured a worker at 10,600
-mappings eight minutes in. `_release_compiled_programs` calls `jax.clear_caches()` after any
-module that leaves the worker above a third of the limit (`JAXROD_TEST_MAP_LOG=FILE` logs
-the count before and after each module).
+executable keeps about ten memory mappings (its code and data sections) for as long as
+JAX's caches hold it, and a worker that runs a few thousand programs nears the kernel's
+per-process limit (`vm.max_map_count`, 65530 by default). Past it XLA logs "LLVM
+compilation error: Cannot allocate memory" and the worker dies of a segfault, in
+`backend_compile_and_load` or, reading the persistent cache, in `get_executable_and_time`
+(both reproduced here with the limit lowered). Two CI runs died in exactly those frames,
+the second 99 % through the suite. A fresh-clone run without the release peaked at 56,422 mappings in one worker;
+with it, at 29,976. `_release_compiled_programs` calls `jax.clear_caches()` after any module
+that leaves the worker above a third of the limit (`JAXROD_TEST_MAP_LOG=FILE` logs the
+count before and after each module; the largest single module, test_snap, adds ~12,000).
 
 The slowest modules are scheduled first (`pytest_collection_modifyitems`), so that under
 `-n 2` the two workers finish at about the same time instead of one running a long module
