@@ -98,11 +98,11 @@ def release_compiled_programs(threshold):
 
 @pytest.fixture(autouse=True, scope="module")
 def _release_compiled_programs(request):
-    start = map_count()
-    yield
-    end = map_count()
-    released = release_compiled_programs(map_limit() // 3)
     log = os.environ.get("JAXROD_TEST_MAP_LOG")  # one line per module: for diagnosis
+    start = map_count() if log else None
+    yield
+    end = map_count() if log else None  # release_compiled_programs counts for itself
+    released = release_compiled_programs(map_limit() // 3)
     if log:
         with open(log, "a") as f:
             f.write(f"{os.getpid()} {request.module.__name__} {start} {end} {released}\n")
