@@ -504,7 +504,7 @@ def simulate_program(scene, waypoints_deg, *, rate=1.0, settle=6.0, damping=3.0,
             dist = float(np.sqrt(np.sum(w * (np.asarray(theta) - static_moves[k].theta) ** 2)))
         out.append(DynamicMove(tuple(a), tuple(b), np.asarray(tr.t_frames), h, letters[0], letters[-1], flips,
                                kin_end, dist, float(tr.v_s), np.asarray(tr.theta), x,
-                               "successful" if bool(tr.result == dfx.RESULTS.successful) else str(tr.result)))
+                               "successful" if bool(tr.result == jr.RESULTS.successful) else str(tr.result)))
     return out
 
 

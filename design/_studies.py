@@ -128,9 +128,7 @@ def verify_snap_speed(psi0_deg, gap, s0, n, reference, *, tol=0.01, direction="u
     sc = design_scene(math.radians(psi0_deg), gap, s0, n)
     try:
         _, tr = jr.snap_dynamics(sc, direction, solver=solver, rtol=rtol, atol=rtol, t1=t1, max_steps=1_000_000)
-        import diffrax as dfx
-
-        solved = bool((tr.result == dfx.RESULTS.successful) | (tr.result == dfx.RESULTS.event_occurred))
+        solved = bool(tr.result == jr.RESULTS.successful)
         v, ok, steps = float(tr.v_s), bool(tr.snapped) and solved, int(tr.num_steps)
     except ValueError:  # the path does not snap: no brink
         v, ok, steps = math.nan, False, 0

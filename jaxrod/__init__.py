@@ -19,6 +19,8 @@ if "xla_cpu_multi_thread_eigen" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false").strip()
 
 from ._continuation import AbstractParameter as AbstractParameter
+from ._contact import clearance as clearance
+from ._contact import self_intersects as self_intersects
 from ._critical_curve import continue_critical as continue_critical
 from ._critical_curve import CriticalCurve as CriticalCurve
 from ._continuation import Branch as Branch

@@ -350,17 +350,17 @@ def _cmd_snap_angles(args):
         rec[f"kind_{name}"] = jr.KIND_NAMES[int(path.kind)]
         rec[f"fold_height_before_{name}"] = val(path.fold_height_before if e is None else e.fold_height_before)
         rec[f"fold_height_after_{name}"] = val(path.fold_height_after if e is None else e.fold_height_after)
-        rec[f"start_{name}"] = _result_name(path.start_result)
-        rec[f"result_{name}"] = _result_name(path.result)
+        rec[f"start_{name}"] = _result_name(path.start_result if e is None else e.start_result)
+        rec[f"result_{name}"] = _result_name(path.result if e is None else e.result)
         if e is not None:
             rec[f"alpha_c_{name}_deg_n"] = val(e.alpha_c_coarse, deg=True)
             rec[f"alpha_c_{name}_deg_n_fine"] = val(e.alpha_c_fine, deg=True)
             rec[f"error_estimate_{name}_deg"] = val(e.error, deg=True)
             rec[f"meshes_consistent_{name}"] = bool(e.consistent)
-    # a path whose outcome is unknown (its start state missing, the continuation gave up,
-    # the landing failed) is not "does not snap": say so, and exit with EXIT_NOT_CONVERGED
-    paths = [r.up, r.down] + ([] if x is None else [x.coarse.up, x.coarse.down])
-    failed = [_result_name(p.result) for p in paths if _result_name(p.result) != "successful"]
+    # any code but success (an unknown outcome, a substituted start, a state through itself,
+    # meshes that disagree, no derivative) is printed and ends with EXIT_NOT_CONVERGED
+    codes = [rec[f"{k}_{name}"] for k in ("result", "start") for name in ("up", "down")]
+    failed = [c for c in codes if c != "successful"]
     if args.json:
         print(json.dumps(rec))
     else:

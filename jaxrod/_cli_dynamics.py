@@ -19,7 +19,8 @@ import json
 import math
 import os
 
-from ._cli import EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, add_scene_args, make_scene_from_args
+from ._cli import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _result_name, add_scene_args,
+                   make_scene_from_args)
 
 PAPER_FIT = (42.59, 30.38, 5.00)
 
@@ -107,6 +108,8 @@ def run_snap(scene, args, kind):
 def _record(start, tr, phys=None):
     import numpy as np
 
+    import jaxrod as jr
+
     def f(x):
         x = float(x)
         return x if math.isfinite(x) else None
@@ -117,10 +120,7 @@ def _record(start, tr, phys=None):
     # snap duration: time the fold speed stays above half its peak
     above = t[ok][fs[ok] >= 0.5 * float(tr.v_s)]
     duration = float(above[-1] - above[0]) if above.size else float("nan")
-    import diffrax as dfx
-
-    solved = bool(start.ok) and bool((tr.result == dfx.RESULTS.successful)
-                                     | (tr.result == dfx.RESULTS.event_occurred))
+    solved = bool(start.ok) and bool(tr.result == jr.RESULTS.successful)
     rec = dict(
         alpha_c_deg=f(np.degrees(float(start.alpha_c))),
         snapped=bool(tr.snapped),
@@ -134,6 +134,7 @@ def _record(start, tr, phys=None):
         energy_drift=f(tr.energy_drift),
         num_steps=int(tr.num_steps),
         converged=solved,
+        result=_result_name(tr.result),
         units="L = B = lambda = 1: speeds in v*, times in T = L/v*, energies in B/L",
     )
     if phys is not None:
@@ -159,7 +160,7 @@ def _cmd_snap(args):
         ta = max(0.0, float(tr.t_peak) - 4.0 * dur)
         tb = float(tr.t_end)
         tr = jr.simulate(start.scene, start.theta0, start.protocol, direction=start.direction, t1=tb,
-                         stop_at_snap=False, solver=args.solver, rtol=args.rtol, atol=args.rtol,
+                         stop_at_snap=args.scene != "asymmetric", solver=args.solver, rtol=args.rtol, atol=args.rtol,
                          frame_window=(ta, tb), n_frames=48)
     try:
         if args.plot:

@@ -25,6 +25,7 @@ import abc
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 from jaxtyping import Array
 
@@ -32,6 +33,7 @@ from . import _kkt
 from ._energy.geometry import discretize
 from ._energy.lagrangian import lagrangian, positions
 from ._equilibrium import _float_scene
+from ._misc import check_bool, check_int, check_number, check_sign, is_concrete
 
 
 def require_float64(dtype, what):
@@ -107,6 +109,16 @@ class Continuation(eqx.Module):
     max_points: int = eqx.field(static=True, default=400)
     corrector_steps: int = eqx.field(static=True, default=8)
     tol: float | None = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        for name in ("ds", "ds_min", "ds_max"):
+            check_number(name, getattr(self, name), lo=0.0)
+        if self.ds_min > self.ds_max:
+            raise ValueError(f"ds_min must not exceed ds_max, got ds_min={self.ds_min!r}, ds_max={self.ds_max!r}")
+        check_int("max_points", self.max_points, lo=2)
+        check_int("corrector_steps", self.corrector_steps, lo=1)
+        if self.tol is not None:
+            check_number("tol", self.tol, lo=0.0)
 
 
 class Branch(eqx.Module):
@@ -219,6 +231,19 @@ def _count(scene, parameter, t, m, lam):
     return _kkt.count_below(Kf(t, m, lam), jnp.zeros(1, t.dtype))[0]
 
 
+def _check_bounds(name, bounds):
+    """`bounds` = (lo, hi), lo < hi, neither NaN (infinite ends allowed); traced ends pass."""
+    try:
+        lo, hi = bounds
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a pair (lo, hi), got {bounds!r}") from None
+    for v in (lo, hi):
+        if is_concrete(v) and (np.ndim(v) != 0 or isinstance(v, (bool, str)) or np.isnan(float(v))):
+            raise ValueError(f"{name} must be a pair of numbers (lo, hi), got {bounds!r}")
+    if is_concrete(lo) and is_concrete(hi) and not float(lo) < float(hi):
+        raise ValueError(f"{name} must be (lo, hi) with lo < hi, got {bounds!r}")
+
+
 @eqx.filter_jit
 def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), *, direction: float = 1.0,
                     bounds=(-jnp.pi, jnp.pi), settings: Continuation = Continuation(),
@@ -236,6 +261,11 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
 
     **Returns:** a [`jaxrod.Branch`][].
     """
+    check_sign("direction", direction)
+    _check_bounds("bounds", bounds)
+    if not isinstance(settings, Continuation):
+        raise ValueError(f"settings must be a jaxrod.Continuation, got {settings!r}")
+    check_bool("stop_on_instability", stop_on_instability)
     scene = lax.stop_gradient(_float_scene(scene))
     dtype = eq.theta.dtype
     require_float64(dtype, "continue_branch")

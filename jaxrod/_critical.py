@@ -45,6 +45,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 from jaxtyping import Array
 
@@ -52,6 +53,7 @@ from . import _linalg
 from ._continuation import AbstractParameter, Gap, SymmetricAlpha
 from ._energy.geometry import discretize
 from ._energy.lagrangian import lagrangian, positions
+from ._misc import check_int, check_number, is_concrete
 from ._solution import RESULTS
 
 
@@ -194,6 +196,11 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
     **Returns:** a [`jaxrod.CriticalPoint`][]; differentiable with respect to every float
     leaf of `scene` by the implicit function theorem.
     """
+    if is_concrete(kind) and (np.ndim(kind) != 0 or isinstance(kind, (bool, str))
+                              or kind not in (KIND_FOLD, KIND_BRANCH_POINT)):
+        raise ValueError(f"kind must be 1 (fold) or 2 (branch point), got {kind!r}")
+    check_int("max_steps", max_steps, lo=1)
+    check_number("tol", tol, lo=0.0)
     dtype = theta.dtype
     N = theta.shape[0]
     sg = lax.stop_gradient
@@ -302,6 +309,8 @@ def cusp_point(scene, theta, force, alpha, mode, *, parameter: AbstractParameter
     `force`, `alpha`, `mode`, at the gap of `scene`). Differentiable (implicit function
     theorem, as `critical_point`) with respect to the float leaves of `scene` other than the
     gap, e.g. $dG_c/d\Psi_0$."""
+    check_int("max_steps", max_steps, lo=1)
+    check_number("tol", tol, lo=0.0)
     dtype = theta.dtype
     N = theta.shape[0]
     sg = lax.stop_gradient

@@ -46,11 +46,12 @@ from jax import lax
 from jaxtyping import Array
 
 from . import _linalg
-from ._continuation import AbstractParameter, SymmetricAlpha, require_float64
+from ._continuation import AbstractParameter, SymmetricAlpha, _check_bounds, require_float64
 from ._critical import (CriticalPoint, CuspPoint, KIND_BRANCH_POINT, _fold_pack, _fold_residual, _fold_unpack,
                         _set_gap, _sym_pack, _sym_residual, _sym_unpack, cusp_point)
 from ._energy.geometry import discretize
 from ._energy.lagrangian import positions
+from ._misc import check_int, check_number
 from ._solution import RESULTS
 
 
@@ -120,6 +121,14 @@ def continue_critical(scene, cp: CriticalPoint, *, direction: float = 1.0, gap_b
         raise ValueError(f"kind must be 1 (fold) or 2 (branch point), got {kind!r}")
     if direction not in (1.0, -1.0, 1, -1):
         raise ValueError(f"direction must be +1 or -1, got {direction!r}")
+    _check_bounds("gap_bounds", gap_bounds)
+    check_number("gap_bounds", gap_bounds[0], lo=0.0)  # gaps are positive; hi > lo checked above
+    for name, v in (("ds", ds), ("ds_min", ds_min), ("ds_max", ds_max), ("tol", tol)):
+        check_number(name, v, lo=0.0)
+    if ds_min > ds_max:
+        raise ValueError(f"ds_min must not exceed ds_max, got ds_min={ds_min!r}, ds_max={ds_max!r}")
+    check_int("max_points", max_points, lo=2)
+    check_int("corrector_steps", corrector_steps, lo=1)
     return _continue_critical(scene, cp, float(direction), tuple(float(g) for g in gap_bounds), parameter, float(ds),
                               float(ds_min), float(ds_max), int(max_points), int(corrector_steps), float(tol),
                               int(kind))

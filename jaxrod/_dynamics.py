@@ -40,11 +40,12 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._energy.bending import bending_energy, turning_angles
 from ._energy.geometry import discretize
 from ._linalg import tridiagonal_solve
-from ._misc import check_param
+from ._misc import check_bool, check_int, check_number, check_param, check_sign, is_concrete
 
 
 class Protocol(eqx.Module):
@@ -63,6 +64,8 @@ class Protocol(eqx.Module):
         for name, v in [("alpha_left0", alpha_left0), ("alpha_right0", alpha_right0),
                         ("rate_left", rate_left), ("rate_right", rate_right)]:
             check_param(name, v)
+        if is_concrete(t_stop) and not np.all(np.asarray(t_stop, float) >= 0.0):  # NaN fails too
+            raise ValueError(f"t_stop must be >= 0 (inf: ramp for ever), got {t_stop!r}")
         self.alpha_left0 = jnp.asarray(alpha_left0, float)
         self.alpha_right0 = jnp.asarray(alpha_right0, float)
         self.rate_left = jnp.asarray(rate_left, float)
@@ -104,6 +107,44 @@ def check_scene(scene):
     """Structural checks at trace time (ValueError naming the parameter)."""
     if scene.stretching is not None:
         raise ValueError("stretching: the dynamics are exactly inextensible; use stretching=None")
+
+
+def check_run_settings(*, t1=2.0, direction=1.0, stop_at_snap=True, rtol=1e-8, atol=1e-8, dt=None,
+                       dissipation=None, baumgarte=20.0, n_fine=None, n_frames=64, frame_window=None,
+                       max_steps=None, courant=None, energy_tol=1e-2, constraint_tol=1e-6):
+    """The settings of `jaxrod.simulate` (the same names and defaults): ValueError naming
+    the first bad one; traced values pass unchecked. `snap_dynamics` calls it before it
+    builds its start state, so that a bad setting fails before any statics are solved."""
+    check_number("t1", t1, lo=0.0)
+    check_sign("direction", direction)
+    check_bool("stop_at_snap", stop_at_snap)
+    check_number("rtol", rtol, lo=0.0, lo_open=False)
+    check_number("atol", atol, lo=0.0, lo_open=False)
+    if is_concrete(rtol) and is_concrete(atol) and float(rtol) == 0.0 and float(atol) == 0.0:
+        raise ValueError("rtol, atol: at least one must be > 0, got rtol=0, atol=0")
+    if dt is not None:
+        check_number("dt", dt, lo=0.0)
+    if dissipation is not None and not isinstance(dissipation, Dissipation):
+        raise ValueError(f"dissipation must be a jaxrod.Dissipation, got {dissipation!r}")
+    check_number("baumgarte", baumgarte, lo=0.0, lo_open=False)
+    if n_fine is not None:
+        check_int("n_fine", n_fine, lo=2)
+    check_int("n_frames", n_frames, lo=1)
+    if max_steps is not None:
+        check_int("max_steps", max_steps, lo=1)
+    if courant is not None:
+        check_number("courant", courant, lo=0.0, hi=0.5)
+    check_number("energy_tol", energy_tol, lo=0.0)
+    check_number("constraint_tol", constraint_tol, lo=0.0)
+    if frame_window is not None:
+        try:
+            ta, tb = frame_window
+        except (TypeError, ValueError):
+            raise ValueError(f"frame_window must be a pair (t_a, t_b), got {frame_window!r}") from None
+        check_number("frame_window", ta, lo=0.0, lo_open=False)
+        check_number("frame_window", tb, lo=0.0, lo_open=False)
+        if all(is_concrete(x) for x in (ta, tb, t1)) and not float(ta) <= float(tb) <= float(t1):
+            raise ValueError(f"frame_window must satisfy 0 <= t_a <= t_b <= t1 = {t1!r}, got {frame_window!r}")
 
 
 def scene_at(scene, aL, aR):

@@ -21,13 +21,14 @@ condition, as real strips have; it is harmless at a fold.
 
 from __future__ import annotations
 
+import inspect
 import math
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._dynamics import Protocol
+from ._dynamics import Protocol, check_run_settings
 from ._energy.geometry import discretize
 from ._equilibrium import solve_equilibrium
 from ._initial import initial_state
@@ -122,6 +123,8 @@ def ramp(scene, direction="up", *, rate=0.5, alpha_start=None, right_only=False,
     sgn = _direction(direction)
     check_param("rate", rate, lo=0.0)
     check_param("seed", seed, lo=0.0, lo_open=False)
+    if alpha_start is not None:
+        check_param("alpha_start", alpha_start)
     alpha_c = jnp.nan
     if alpha_start is None:
         if right_only:
@@ -149,6 +152,18 @@ def snap_dynamics(scene, direction="up", *, kind="brink", nudge=1e-2, past=1e-3,
     Returns (start, trajectory)."""
     from ._dynamics_solve import simulate
 
+    # every setting before any statics are solved (the start state costs a snap_angles)
+    if kind not in ("brink", "ramp", "asymmetric"):
+        raise ValueError(f"kind must be 'brink', 'ramp' or 'asymmetric', got {kind!r}")
+    _direction(direction)
+    check_param("nudge", nudge, lo=0.0)
+    check_param("past", past, lo=0.0, lo_open=False)
+    check_param("rate", rate, lo=0.0)
+    check_param("seed", seed, lo=0.0, lo_open=False)
+    if alpha_start is not None:
+        check_param("alpha_start", alpha_start)
+    names = inspect.signature(check_run_settings).parameters
+    check_run_settings(**{k: v for k, v in simulate_kwargs.items() if k in names})
     if kind == "brink":
         start = brink(scene, direction, nudge=nudge, past=past, snap=snap)
     elif kind == "ramp":

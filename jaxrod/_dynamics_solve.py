@@ -40,9 +40,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._dynamics import Dissipation, Protocol, accelerations, check_scene, observables
+from ._dynamics import (Dissipation, Protocol, accelerations, check_run_settings, check_scene, kinetic_energy,
+                        observables, potential_energy, scene_at)
 from ._energy.geometry import discretize
 from ._rattle import Rattle
+from ._solution import RESULTS
 
 
 SOLVERS = {
@@ -65,8 +67,12 @@ class Trajectory(eqx.Module):
     Frames `t_frames` (n_frames,): `theta` (n_frames, N), `positions` (n_frames, N+1, 2),
     `speed` (n_frames, N+1) node speeds. Scalars: `v_s` (peak fold speed, units of the
     scene, i.e. v* when L = B = lambda = 1), `t_peak`, `t_cross` (fold height crosses 0),
-    `t_end`, `snapped`, `kinetic_peak`, `energy_drift` (max |E_k+V-W - E(0)| / V(0)),
-    `num_steps`, `result` (diffrax RESULTS)."""
+    `t_end`, `snapped`, `kinetic_peak`, `energy_drift` (max |E_k+V-W - E(0)| / V(0), NaN when
+    damped), `num_steps`, `result` (a [`jaxrod.RESULTS`][] code: `successful` for a run that
+    reached `t1` or ended at the snap; `energy_drift`, `constraint_drift`,
+    `constraint_solve_failed`, `steps_exhausted`, `integration_failed` or `nonfinite` for a run
+    stopped early, whose samples up to `t_end` are those computed before the stop),
+    `solver_result` (diffrax's own code)."""
 
     t: jax.Array
     fold_height: jax.Array
@@ -88,7 +94,8 @@ class Trajectory(eqx.Module):
     kinetic_peak: jax.Array
     energy_drift: jax.Array
     num_steps: jax.Array
-    result: dfx.RESULTS
+    result: RESULTS
+    solver_result: dfx.RESULTS
 
 
 def _field(t, y, args):
@@ -150,22 +157,44 @@ def _refine_peak(t, f):
 # crease during the snap (rate ~ v_s / s0), not stability, sets the error: measured at N = 24,
 # energy error 1.1e-3 at dt = 1.8e-4 T but 1.3e-2 at 7.3e-4 T (v_s error 7e-4).
 DT_CAP = 2e-4
+# Past the snap (`stop_at_snap=False`) the strip slams into the other state and rings, with
+# waves of the crease's width and tensions of ~10^3 B/L^2 at the slam (measured at Psi0 = 30
+# deg, G/L = 0.5, s0 = 0.02): the step of the snap itself (courant 0.45) then goes unstable
+# ~0.1 T after the crossing, and courant 0.15 at N = 50 leaves a 5 % energy error. The ringing
+# step is min(RING_COURANT h^2, DT_RING) T; measured over 6 T of ringing (energy error relative
+# to the start energy): 8e-5 at N = 50, 6.5e-4 at N = 100 (dt = 1e-5), see tests/test_long_horizon.py.
+RING_COURANT = 0.2
+DT_RING = 1e-5
 # RATTLE steps per diffrax step at the automatic step (see `simulate`).
 DEFAULT_SUBSTEPS = 4
 
 
-def _rattle_dt_natural(scene, courant):
+def _rattle_dt_natural(scene, courant, cap=DT_CAP):
     """RATTLE's largest step in units of T (static: from the mesh fractions)."""
     frac_min = float(np.min(np.diff(np.asarray(scene.mesh.fractions))))
-    return min(courant * frac_min**2, DT_CAP)
+    return min(courant * frac_min**2, cap)
 
 
-def _default_n_fine(scene, solver, dt, t1, courant, substeps=1):
+def _default_n_fine(scene, solver, dt, t1, courant, substeps=1, cap=DT_CAP):
     """16384 samples; for RATTLE without `dt`, one per (macro) step (natural units, at most
     2^19, at least 2048), so its step is its largest one rather than a divisor of the grid."""
     if solver not in FIXED_STEP or dt is not None or not isinstance(t1, (int, float)) or not 0 < courant < 0.5:
         return 16384
-    return int(min(max(math.ceil(t1 / (substeps * _rattle_dt_natural(scene, courant))) + 1, 2048), 2**19))
+    return int(min(max(math.ceil(t1 / (substeps * _rattle_dt_natural(scene, courant, cap))) + 1, 2048), 2**19))
+
+
+def _verdict(sol, event_on, finite):
+    """jaxrod's code for a diffrax solution (see `Trajectory.result`)."""
+    sr = sol.result
+    res = RESULTS.where(sr == dfx.RESULTS.successful, RESULTS.successful, RESULTS.integration_failed)
+    res = RESULTS.where(sr == dfx.RESULTS.max_steps_reached, RESULTS.steps_exhausted, res)
+    res = RESULTS.where(sr == dfx.RESULTS.nonlinear_divergence, RESULTS.constraint_solve_failed, res)
+    if event_on:
+        _, energy_bad, constraint_bad = sol.event_mask
+        on_event = RESULTS.where(energy_bad, RESULTS.energy_drift,
+                                 RESULTS.where(constraint_bad, RESULTS.constraint_drift, RESULTS.successful))
+        res = RESULTS.where(sr == dfx.RESULTS.event_occurred, on_event, res)
+    return RESULTS.where((res == RESULTS.successful) & ~finite, RESULTS.nonfinite, res)
 
 
 @eqx.filter_jit
@@ -173,7 +202,8 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
              stop_at_snap: bool = True, solver: str = "rattle", rtol=1e-8, atol=1e-8, dt=None,
              dissipation: Dissipation = Dissipation(), baumgarte=20.0, n_fine: int | None = None,
              n_frames: int = 64, frame_window=None, max_steps: int | None = None,
-             courant: float = 0.45, substeps: int | None = None) -> Trajectory:
+             courant: float | None = None, substeps: int | None = None, energy_tol=1e-2,
+             constraint_tol=1e-6) -> Trajectory:
     r"""Integrate the strip from angles `theta0` (and rates `omega0`, default 0) under the
     clamp `protocol` for $t\in[0,t_1]$ (see the module docstring).
 
@@ -184,7 +214,10 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     `frame_window` (t_a, t_b) the span of the `n_frames` frames (default (0, t1));
     `courant` (`"rattle"` only, when `dt` is None): the step is the largest
     $\Delta t\le\min($`courant`$\,(h_{\min}/L)^2,\ 2\cdot10^{-4})\,T$, $T=L^2\sqrt{\lambda/B}$
-    (the cap `DT_CAP` matters below N ~ 48) that divides the fine-grid spacing
+    (the cap `DT_CAP` matters below N ~ 48; default `courant` 0.45) when the run stops at the
+    snap, and $\min($`courant`$\,(h_{\min}/L)^2,\ 10^{-5})\,T$ (default `courant` 0.2,
+    `RING_COURANT`, `DT_RING`) when it goes on past it (`stop_at_snap=False`: the slam and the
+    ringing need the smaller step, see `DT_RING`), in either case the largest that divides the fine-grid spacing
     $t_1/(n_{fine}-1)$, so every fine-grid sample is a step point (no interpolation error in
     $v_s$ or the energies; by default `n_fine` is one sample per step); RATTLE is stable
     below 0.5 (the highest bending mode $4\sqrt{B/\lambda}/h^2$). `substeps` (`"rattle"`
@@ -195,10 +228,22 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     (`benchmarks/results/pyelastica.md` measures the trade: 1.7x less time at N = 50, v_s
     error 9.6e-5 instead of 3.5e-5). `max_steps`: default 200 000, or for `"rattle"` enough fixed
     steps for $t_1$ when $L=B=\lambda=1$; a run that hits it ends with
-    `result == RESULTS.max_steps_reached`.
+    `result == RESULTS.steps_exhausted`.
+
+    **Monitors.** The run is stopped, with a code in `Trajectory.result`, as soon as (checked
+    after every diffrax step) the energy balance of an undamped run drifts,
+    $|E_k+V-W-E(0)|>$`energy_tol`$\cdot\max(|E(0)|, B/L)$ (`RESULTS.energy_drift`; default
+    1e-2), the right end leaves the clamp, $|\mathbf x_N-(G,0)|>$`constraint_tol`$\cdot L$
+    (`RESULTS.constraint_drift`; default 1e-6), the state is not finite, or RATTLE's constraint
+    solve does not converge (`RESULTS.constraint_solve_failed`). Damped runs (any
+    `dissipation`) have no energy monitor (their energy is meant to fall).
 
     **Returns:** a [`jaxrod.Trajectory`][].
     """
+    check_run_settings(t1=t1, direction=direction, stop_at_snap=stop_at_snap, rtol=rtol, atol=atol, dt=dt,
+                       dissipation=dissipation, baumgarte=baumgarte, n_fine=n_fine, n_frames=n_frames,
+                       frame_window=frame_window, max_steps=max_steps, courant=courant,
+                       energy_tol=energy_tol, constraint_tol=constraint_tol)
     check_scene(scene)
     if substeps is None:
         substeps = DEFAULT_SUBSTEPS if (solver == "rattle" and dt is None) else 1
@@ -217,8 +262,11 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     y0 = (jnp.stack([theta0, omega0]), jnp.zeros((), dtype))
     d = discretize(scene)
     args = (scene, protocol, dissipation, jnp.asarray(baumgarte, dtype), d)
+    cap = DT_CAP if stop_at_snap else DT_RING
+    if courant is None:
+        courant = 0.45 if stop_at_snap else RING_COURANT
     if n_fine is None:
-        n_fine = _default_n_fine(scene, solver, dt, t1, courant, substeps)
+        n_fine = _default_n_fine(scene, solver, dt, t1, courant, substeps, cap)
     ts = jnp.linspace(0.0, t1, n_fine)
     if frame_window is None:
         frame_window = (0.0, t1)
@@ -244,20 +292,45 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
         vy = jnp.sum(d.h[:k] * jnp.cos(th) * om)
         return (direction * fh > 0.0) & (direction * vy < 0.0)
 
-    event = dfx.Event(done) if stop_at_snap else None
+    conservative = (dissipation.damping == 0) & (dissipation.drag == 0) & (dissipation.viscosity == 0)
+    st = scene.strip
+
+    def balance(t, y):
+        """E_k + V - W and the end-position error of a state y = ((theta, omega), W)."""
+        q, w = y
+        aL, aR, _, _ = protocol.angles(t)
+        dd = d._replace(theta_left=jnp.asarray(aL, dtype), theta_right=-jnp.asarray(aR, dtype))
+        th, om = q[0], q[1]
+        e = kinetic_energy(th, om, dd) + potential_energy(th, scene_at(scene, aL, aR), dd) - w
+        end = jnp.stack([jnp.sum(d.h * jnp.cos(th)) - scene.clamps.gap, jnp.sum(d.h * jnp.sin(th))])
+        return e, jnp.sqrt(jnp.sum(end**2))
+
+    e0, _ = balance(0.0, y0)
+    e_scale = jnp.maximum(jnp.abs(e0), st.bending_stiffness / st.length)
+
+    def energy_bad(t, y, a, **kw):
+        e, _ = balance(t, y)
+        return conservative & ~(jnp.abs(e - e0) <= energy_tol * e_scale)
+
+    def constraint_bad(t, y, a, **kw):
+        _, c = balance(t, y)
+        finite = jnp.all(jnp.isfinite(y[0])) & jnp.isfinite(y[1])
+        return ~(c <= constraint_tol * st.length) | ~finite
+
+    snap_done = done if stop_at_snap else (lambda t, y, a, **kw: jnp.zeros((), bool))
+    event = dfx.Event((snap_done, energy_bad, constraint_bad))
     if solver in FIXED_STEP and dt is None:
         if not 0.0 < courant < 0.5:
             raise ValueError(f"courant must lie in (0, 0.5) (RATTLE's stability limit), got {courant!r}")
-        st = scene.strip
         T = st.length**2 * jnp.sqrt(st.line_density / st.bending_stiffness)
-        dt_max = substeps * _rattle_dt_natural(scene, courant) * T
+        dt_max = substeps * _rattle_dt_natural(scene, courant, cap) * T
         grid = t1 / (n_fine - 1)
         dt = grid / jnp.ceil(grid / dt_max)
         if max_steps is None:
             steps = 0
             if isinstance(t1, (int, float)):  # natural units L = B = lambda = 1
                 g = t1 / (n_fine - 1)
-                steps = (n_fine - 1) * math.ceil(g / (substeps * _rattle_dt_natural(scene, courant)))
+                steps = (n_fine - 1) * math.ceil(g / (substeps * _rattle_dt_natural(scene, courant, cap)))
             max_steps = max(200_000, steps + 64)
     if max_steps is None:
         max_steps = 200_000
@@ -276,7 +349,7 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     sol = dfx.diffeqsolve(dfx.ODETerm(_field), slv, 0.0, t1, dt0, y0, args, saveat=saveat,
                           stepsize_controller=controller, event=event, max_steps=max_steps, throw=False)
     o, fr = sol.ys
-    t_end = sol.ts[0][-1] if False else jnp.max(jnp.where(jnp.isfinite(sol.ts[0]), sol.ts[0], 0.0))
+    t_end = jnp.max(jnp.where(jnp.isfinite(sol.ts[0]), sol.ts[0], 0.0))
     t_end = jnp.maximum(t_end, 0.0)
     v_s, t_peak = _refine_peak(ts, o["fold_speed"])
     fh = o["fold_height"]
@@ -289,7 +362,6 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     snapped = jnp.any(cross)
     E = o["kinetic"] + o["potential"] - o["work"]
     fin = jnp.isfinite(E)
-    conservative = (dissipation.damping == 0) & (dissipation.drag == 0) & (dissipation.viscosity == 0)
     drift = jnp.max(jnp.where(fin, jnp.abs(E - E[0]), 0.0)) / jnp.abs(o["potential"][0])
     drift = jnp.where(conservative, drift, jnp.nan)
     kin = jnp.where(jnp.isfinite(o["kinetic"]), o["kinetic"], -jnp.inf)
@@ -298,5 +370,7 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
         kinetic=o["kinetic"], clamp_work=o["work"], constraint=o["constraint"], t_frames=tf,
         theta=fr["theta"], positions=fr["positions"], speed=fr["speed"], v_s=v_s, t_peak=t_peak,
         t_cross=t_cross, t_end=t_end, snapped=snapped, kinetic_peak=jnp.max(kin), energy_drift=drift,
-        num_steps=sol.stats["num_steps"] * substeps, result=sol.result,  # RATTLE steps (substeps: 1 otherwise)
+        num_steps=sol.stats["num_steps"] * substeps,  # RATTLE steps (substeps: 1 otherwise)
+        result=_verdict(sol, True, jnp.all(jnp.where(jnp.isfinite(sol.ts[0]), jnp.isfinite(E), True))),
+        solver_result=sol.result,
     )

@@ -32,7 +32,7 @@ from jax import lax
 from . import _kkt
 from ._energy.geometry import discretize, scene_dtype
 from ._energy.lagrangian import lagrangian
-from ._misc import run_if
+from ._misc import check_bool, check_int, check_number, run_if
 from ._solution import RESULTS, Equilibrium
 
 
@@ -52,6 +52,13 @@ class Newton(eqx.Module):
     gtol: float | None = eqx.field(static=True, default=None)
     minimize: bool = eqx.field(static=True, default=True)
     max_backtracks: int = eqx.field(static=True, default=30)
+
+    def __check_init__(self):
+        check_int("max_steps", self.max_steps, lo=1)
+        if self.gtol is not None:
+            check_number("gtol", self.gtol, lo=0.0)
+        check_bool("minimize", self.minimize)
+        check_int("max_backtracks", self.max_backtracks, lo=0)
 
 
 def _float_scene(scene):
@@ -279,6 +286,9 @@ def solve_equilibrium(scene, theta0, mu0=None, *, solver: Newton = Newton(), thr
     **Returns:** an [`jaxrod.Equilibrium`][]. Differentiable with respect to every float
     leaf of `scene` (implicit function theorem).
     """
+    if not isinstance(solver, Newton):
+        raise ValueError(f"solver must be a jaxrod.Newton, got {solver!r}")
+    check_bool("throw", throw)
     eq = _solve_impl(scene, theta0, mu0, solver)
     if throw:
         eq = eqx.tree_at(lambda e: e.theta, eq,

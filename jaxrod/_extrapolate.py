@@ -27,6 +27,7 @@ from jaxtyping import Array
 
 from ._rod import Mesh, Scene
 from ._snap import SnapAngles, SnapPath, snap_angles
+from ._solution import RESULTS
 
 
 ORDER = 2
@@ -38,7 +39,12 @@ class ExtrapolatedPath(eqx.Module):
     `snaps`, `kind` (of the fine mesh), `alpha_c` (rad; NaN if it does not snap),
     `error` (rad, estimated error: of the fine mesh's value, an upper bound for
     `alpha_c`'s own where `consistent`), `alpha_c_coarse`, `alpha_c_fine`,
-    `fold_height_before`, `fold_height_after` (extrapolated likewise), `consistent`."""
+    `fold_height_before`, `fold_height_after` (extrapolated likewise), `consistent`;
+    `result` the verdict on both meshes (the fine mesh's path code if it is not successful,
+    else the coarse mesh's, else `mesh_inconsistent` where the meshes disagree, else
+    `successful`), `start_result` likewise for the start states, and every code of each mesh:
+    `result_coarse`, `result_fine`, `start_result_coarse`, `start_result_fine`,
+    `refine_result_coarse`, `refine_result_fine` (None without the refinement)."""
 
     snaps: Array
     kind: Array
@@ -49,6 +55,14 @@ class ExtrapolatedPath(eqx.Module):
     fold_height_before: Array
     fold_height_after: Array
     consistent: Array
+    result: RESULTS
+    start_result: RESULTS
+    result_coarse: RESULTS
+    result_fine: RESULTS
+    start_result_coarse: RESULTS
+    start_result_fine: RESULTS
+    refine_result_coarse: RESULTS | None = None
+    refine_result_fine: RESULTS | None = None
 
 
 class ExtrapolatedSnapAngles(eqx.Module):
@@ -80,12 +94,23 @@ def _combine(c: SnapPath, f: SnapPath) -> ExtrapolatedPath:
     err = jnp.where(both, jnp.abs(f.alpha_c - c.alpha_c) / r,
                     jnp.where(c.snaps & f.snaps, jnp.abs(f.alpha_c - c.alpha_c), jnp.nan))
     err = jnp.where(~c.snaps & ~f.snaps, 0.0, err)
+    ok = RESULTS.successful
+
+    def worst(cr, fr):
+        return RESULTS.where(fr != ok, fr, cr)
+
+    result = worst(c.result, f.result)
+    result = RESULTS.where((result == ok) & ~consistent, RESULTS.mesh_inconsistent, result)
     return ExtrapolatedPath(
         snaps=f.snaps, kind=f.kind, alpha_c=ex(c.alpha_c, f.alpha_c), error=err,
         alpha_c_coarse=c.alpha_c, alpha_c_fine=f.alpha_c,
         fold_height_before=ex(c.fold_height_before, f.fold_height_before),
         fold_height_after=ex(c.fold_height_after, f.fold_height_after),
         consistent=consistent,
+        result=result, start_result=worst(c.start_result, f.start_result),
+        result_coarse=c.result, result_fine=f.result,
+        start_result_coarse=c.start_result, start_result_fine=f.start_result,
+        refine_result_coarse=c.refine_result, refine_result_fine=f.refine_result,
     )
 
 

@@ -31,6 +31,7 @@ from ._continuation import Continuation, SymmetricAlpha, continue_branch, requir
 from ._energy.lagrangian import energies as _energies
 from ._energy.lagrangian import positions
 from ._equilibrium import _float_scene
+from ._misc import check_int, check_number
 from ._snap import SnapAngles, snap_angles
 from ._solution import RESULTS, Equilibrium
 
@@ -80,7 +81,11 @@ def hysteresis(scene, *, bound: float = jnp.pi, max_unstable: int = 1,
 
     Two compiled pieces, `snap_angles` (shared with every other caller) and the
     vmapped continuation of the four branches, so `hysteresis` itself is not meant to be
-    wrapped in `jit`."""
+    wrapped in `jit`. `bound` in $(0,\pi]$ (rad), `max_unstable` an integer >= 0."""
+    check_number("bound", bound, lo=0.0, hi=jnp.pi, hi_open=False)
+    check_int("max_unstable", max_unstable, lo=0)
+    if not isinstance(settings, Continuation):
+        raise ValueError(f"settings must be a jaxrod.Continuation, got {settings!r}")
     parameter = SymmetricAlpha()
     scene = jax.lax.stop_gradient(parameter.set(_float_scene(scene), 0.0))
     dtype = jnp.result_type(scene.strip.psi0)

@@ -25,6 +25,7 @@ from jax import lax
 from ._energy.geometry import discretize, scene_dtype
 from ._energy.lagrangian import positions
 from ._equilibrium import Newton, _float_scene, solve_equilibrium
+from ._misc import check_int
 from ._solution import RESULTS, Equilibrium
 
 
@@ -97,6 +98,9 @@ def initial_state(scene, state: str = "up", *, steps: int = 24, solver: Newton =
     """
     if state not in ("up", "down"):
         raise ValueError(f"state must be 'up' or 'down', got {state!r}")
+    check_int("steps", steps, lo=1)
+    if not isinstance(solver, Newton):
+        raise ValueError(f"solver must be a jaxrod.Newton, got {solver!r}")
     return _initial_state(scene, 1.0 if state == "up" else -1.0, steps=steps, solver=solver)
 
 

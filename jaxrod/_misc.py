@@ -24,7 +24,10 @@ def check_param(name: str, value, *, lo=None, hi=None, lo_open=True, hi_open=Tru
     """
     if not is_concrete(value):
         return
-    arr = np.asarray(value, dtype=float) * scale
+    try:
+        arr = np.asarray(value, dtype=float) * scale
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
     def fmt(b):
@@ -39,6 +42,43 @@ def check_param(name: str, value, *, lo=None, hi=None, lo_open=True, hi_open=Tru
         if np.any(bad):
             rng = f"{'(' if lo_open else '['}{fmt(lo) if lo is not None else '-inf'}, {fmt(hi)}{')' if hi_open else ']'}"
             raise ValueError(f"{name} must lie in {rng}, got {value!r}")
+
+
+def check_int(name: str, value, *, lo: int = 1, hi: int | None = None) -> None:
+    """Raise `ValueError` naming `name` unless `value` is an integer (Python or NumPy, not a
+    bool) in [`lo`, `hi`]: for the integer settings (loop counts, buffer sizes). A 0-d
+    integer array counts as an integer; a traced value passes unchecked."""
+    if not is_concrete(value):
+        return
+    if isinstance(value, (jax.Array, np.ndarray)) and value.ndim == 0 and jnp.issubdtype(value.dtype, jnp.integer):
+        value = int(value)
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name} must be an integer, got {value!r}")
+    if value < lo or (hi is not None and value > hi):
+        rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise ValueError(f"{name} must be an integer {rng}, got {value!r}")
+
+
+def check_bool(name: str, value) -> None:
+    """Raise `ValueError` naming `name` unless `value` is a bool (a static flag)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+
+
+def check_number(name: str, value, **bounds) -> None:
+    """[`check_param`][] for a scalar setting that must be a real number: also rejects a
+    bool, a string or None by name (a traced value passes unchecked)."""
+    if is_concrete(value) and (isinstance(value, (bool, np.bool_, str, bytes)) or value is None
+                               or np.ndim(value) != 0 or not np.isrealobj(value)):
+        raise ValueError(f"{name} must be a real number, got {value!r}")
+    check_param(name, value, **bounds)
+
+
+def check_sign(name: str, value) -> None:
+    """Raise `ValueError` naming `name` unless a concrete `value` is +1 or -1."""
+    if is_concrete(value) and (isinstance(value, (bool, np.bool_, str)) or np.ndim(value) != 0
+                               or not np.isrealobj(value) or float(value) not in (1.0, -1.0)):
+        raise ValueError(f"{name} must be +1 or -1, got {value!r}")
 
 
 def default_float():

@@ -36,12 +36,13 @@ from ._continuation import (
     require_float64,
     corrector,
 )
+from ._contact import self_intersects
 from ._critical import critical_point
 from ._energy.geometry import discretize
 from ._energy.lagrangian import positions
 from ._equilibrium import Newton, _float_scene, solve_equilibrium
 from ._initial import _initial_state
-from ._misc import run_if
+from ._misc import check_bool, check_int, check_number, run_if
 from ._solution import RESULTS, Equilibrium
 from ._stability import mode_parity
 
@@ -61,7 +62,15 @@ class SnapPath(eqx.Module):
     branch unless `continue_after_snap=False`), `result` (a RESULTS code for the start
     state), `refine_result` (the RESULTS code of the extended-system refinement of the
     critical point, `jaxrod.critical_point`; where it fails the bisection values are kept),
-    `mode` the critical mode (angle part, unit $L^2$ norm).
+    `mode` the critical mode (angle part, unit $L^2$ norm), `jump` the $L^2$ distance of the
+    landed angle field from the critical one (rad; NaN if it does not snap).
+
+    `result` is the whole path's code: `successful`, or the start state's code where it does
+    not exist, `continuation_incomplete`, `landing_failed`, `self_intersecting` (the
+    critical or the landed state passes through itself), `derivative_unavailable` (the
+    refinement failed: `alpha_c` is the bisection value). `start_result` is
+    `start_substituted` where the path started from the other path's end (see the module
+    docstring).
 
     `alpha_c`, `theta_before`, `force_before` and `fold_height_before` are differentiable
     with respect to the float leaves of the scene (implicit differentiation of the
@@ -80,6 +89,7 @@ class SnapPath(eqx.Module):
     result: RESULTS
     start_result: RESULTS
     stop: Array
+    jump: Array | None = None
     refine_result: RESULTS | None = None
     mode: Array | None = None
 
@@ -166,14 +176,16 @@ def _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bise
 
 
 def _path(scene, start_eq, direction, parameter, settings, bound, bisections, tol, stages=2,
-          continue_after_snap=True):
+          continue_after_snap=True, substituted=False):
     """One direction of the loop. After a loss of stability the critical state is pushed
-    along the unstable mode 1e-3 rad past alpha_c and relaxed. If it lands more than
-    `JUMP_DISTANCE` away (L2 norm of the angle field) the strip snaps there (to the other
-    state, or to a distant asymmetric one). If it lands close by, the instability was
-    supercritical (a stable asymmetric branch grows continuously out of a branch point,
-    amplitude ~ sqrt(1e-3) ~ 0.03): no snap yet, and the path continues from that
-    state, up to `stages` times."""
+    along the unstable mode 1e-3 rad past alpha_c and relaxed. At a fold the strip snaps
+    there, however small the jump (past a fold the branch has no equilibrium nearby: the
+    landed state is another one). At a branch point it snaps if it lands more than
+    `JUMP_DISTANCE` away (L2 norm of the angle field; to the other state, or to a distant
+    asymmetric one); if it lands close by, the instability was supercritical (a stable
+    asymmetric branch grows continuously out of the branch point, amplitude
+    ~ sqrt(1e-3) ~ 0.03): no snap yet, and the path continues from that state, up to
+    `stages` times. `substituted` (traced bool): the start is the other path's end."""
     def body(c, _):
         t0, m0, lam0, ok, done, out = c
         def run(sc, d, args):
@@ -194,13 +206,13 @@ def _path(scene, start_eq, direction, parameter, settings, bound, bisections, to
             br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = run_if(~done, run, skipped, (scene, direction, args))
         w = discretize(scene).h
         dist = jnp.sqrt(jnp.sum(w * (ta - t) ** 2))
-        jumped = snaps & (dist > JUMP_DISTANCE) & landed
+        jumped = snaps & ((dist > JUMP_DISTANCE) | (kind == KIND_FOLD)) & landed
         # the path is decided here if it did not lose stability (bound reached, start
         # missing, or the continuation gave up: `stop` tells which), if it jumped, or if it
         # lost stability but the relaxation past alpha_c found no equilibrium (`landed`
         # False: a loss of stability all the same, whose landing is unknown)
         final = ~done & (~snaps | jumped | ~landed)
-        new_out = (snaps, kind, t, m, lam, fb, ta, ma, fa, br.stop, landed)
+        new_out = (snaps, kind, t, m, lam, fb, ta, ma, fa, br.stop, landed, dist)
         out = jax.tree.map(lambda n, o: jnp.where(final, n, o), new_out, out)
         lam_next = lam + direction * 1e-3
         nxt = (ta, ma, lam_next, ok & snaps & landed, done | final, out)
@@ -209,20 +221,25 @@ def _path(scene, start_eq, direction, parameter, settings, bound, bisections, to
     dtype = start_eq.theta.dtype
     nan = jnp.full((), jnp.nan, dtype)
     out0 = (jnp.zeros((), bool), jnp.zeros((), jnp.int32), start_eq.theta, start_eq.force, nan, nan,
-            start_eq.theta, start_eq.force, nan, jnp.full((), -1, jnp.int32), jnp.ones((), bool))
+            start_eq.theta, start_eq.force, nan, jnp.full((), -1, jnp.int32), jnp.ones((), bool), nan)
     lam0 = parameter.get(start_eq.scene)
     ok0 = start_eq.result == RESULTS.successful
     init = (start_eq.theta, start_eq.force, jnp.asarray(lam0, dtype), ok0, jnp.zeros((), bool), out0)
     (_, _, _, _, done, out), branches = lax.scan(body, init, None, length=stages)
-    snaps, kind, t, m, lam, fb, ta, ma, fa, stop, landed = out
+    snaps, kind, t, m, lam, fb, ta, ma, fa, stop, landed, dist = out
     snaps = snaps & done
     # decided without a snap, but not at the parameter bound (stop 1): the continuation
     # gave up (buffer full, step too small); or never decided (every stage supercritical)
     incomplete = ~done | (~snaps & (stop != 1))
+    # the reported states must be configurations of the contact-free model: the critical
+    # state (the start state where the path does not snap) and the landed one
+    crossed = self_intersects(t, scene) | (snaps & landed & self_intersects(ta, scene))
     result = RESULTS.where(
         ~ok0, start_eq.result,
         RESULTS.where(incomplete, RESULTS.continuation_incomplete,
-                      RESULTS.where(snaps & ~landed, RESULTS.landing_failed, RESULTS.successful)))
+                      RESULTS.where(snaps & ~landed, RESULTS.landing_failed,
+                                    RESULTS.where(crossed, RESULTS.self_intersecting, RESULTS.successful))))
+    start_result = RESULTS.where(ok0 & substituted, RESULTS.start_substituted, start_eq.result)
     lost = snaps & ~landed  # no landed state: NaN rather than the failed relaxation's iterate
     return SnapPath(
         snaps=snaps,
@@ -236,8 +253,9 @@ def _path(scene, start_eq, direction, parameter, settings, bound, bisections, to
         fold_height_after=jnp.where(snaps & landed, fa, nan),
         branch=branches,
         result=result,
-        start_result=start_eq.result,
+        start_result=start_result,
         stop=stop,
+        jump=jnp.where(snaps & landed, dist, nan),
     )
 
 
@@ -269,7 +287,15 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     The angles are those of the scene's mesh: second-order accurate, off by up to 0.17 deg
     at N = 100 ($s_0=0.02$). For the continuum value use
     [`jaxrod.snap_angles_extrapolated`][] (Richardson from $N$ and $2N$, ~1e-5 deg).
+
+    `bound` must lie in $(0,\pi]$ (rad), `bisections` be a positive integer.
     """
+    if not isinstance(settings, Continuation):
+        raise ValueError(f"settings must be a jaxrod.Continuation, got {settings!r}")
+    check_number("bound", bound, lo=0.0, hi=jnp.pi, hi_open=False)
+    check_int("bisections", bisections, lo=1)
+    check_bool("polish", polish)
+    check_bool("continue_after_snap", continue_after_snap)
     parameter = SymmetricAlpha()
     scene_d = parameter.set(_float_scene(scene), 0.0)  # carries gradients to the refinement
     scene = lax.stop_gradient(scene_d)
@@ -314,7 +340,7 @@ def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, cont
         start = jax.tree.map(lambda u, d, a: jnp.where(direction < 0, u, jnp.where(has_down, d, a)),
                              arrays(up_eq), arrays(down_eq), alt)
         path = _path(scene, eqx.combine(start, static), direction, parameter, settings, bound, bisections, tol,
-                     continue_after_snap=continue_after_snap)
+                     continue_after_snap=continue_after_snap, substituted=need_alt)
         br = jax.tree.map(lambda x: x[0], path.branch)  # first stage
         last = br.count - 1
         nxt = (br.lam[last], br.theta[last], br.force[last], path.snaps, path.alpha_c, path.theta_after,
@@ -345,10 +371,14 @@ def _polish(scene_d, path, parameter):
     refine_result = RESULTS.where(path.snaps, cp.result, RESULTS.successful)
     refine_result = RESULTS.where(ok | ~path.snaps, refine_result, RESULTS.where(
         cp.result == RESULTS.successful, RESULTS.max_steps_reached, cp.result))
+    # a failed refinement leaves the bisection value, which carries no derivative: say so
+    result = RESULTS.where((path.result == RESULTS.successful) & path.snaps & ~ok,
+                           RESULTS.derivative_unavailable, path.result)
     return eqx.tree_at(
-        lambda p: (p.alpha_c, p.theta_before, p.force_before, p.fold_height_before, p.refine_result, p.mode),
+        lambda p: (p.alpha_c, p.theta_before, p.force_before, p.fold_height_before, p.refine_result, p.mode,
+                   p.result),
         path,
         (pick(cp.alpha, path.alpha_c), pick(cp.theta, path.theta_before), pick(cp.force, path.force_before),
-         pick(cp.fold_height, path.fold_height_before), refine_result, jnp.where(ok, cp.mode, v)),
+         pick(cp.fold_height, path.fold_height_before), refine_result, jnp.where(ok, cp.mode, v), result),
         is_leaf=lambda x: x is None,
     )

@@ -99,7 +99,7 @@ import jax.numpy as jnp
 
 from ._dynamics import Protocol
 from ._dynamics_scenes import _direction, project
-from ._dynamics_solve import FIXED_STEP, _rattle_dt_natural, simulate
+from ._dynamics_solve import FIXED_STEP, SOLVERS, _rattle_dt_natural, simulate
 from ._energy.geometry import discretize
 from ._misc import check_param
 from ._snap import snap_angles
@@ -220,6 +220,8 @@ def _speed_jvp(primals, tangents, *, opts):
 
 def _options(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
     _direction(direction)
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {solver!r}")
     check_param("nudge", nudge, lo=0.0)
     check_param("past", past, lo=0.0, lo_open=False)
     check_param("t1", t1, lo=0.0)

@@ -17,6 +17,7 @@ from jaxtyping import Array
 
 from . import _kkt
 from ._linalg import solve2
+from ._misc import check_int
 
 
 class Stability(eqx.Module):
@@ -49,7 +50,12 @@ def mode_parity(modes):
 @eqx.filter_jit
 def stability(eq, k: int = 4) -> Stability:
     r"""The `k` smallest eigenvalues of the constrained Hessian at `eq`, their modes and
-    parities, and the count of negative eigenvalues."""
+    parities, and the count of negative eigenvalues. `k`: an integer from 1 to N - 2, the
+    number of degrees of freedom of an inextensible strip (the end condition removes two;
+    an extensible strip has N, but its bisection brackets, $\lambda_j\le\lambda_{j+2}(T)$,
+    hold for the N - 2 lowest only: above them it returned the bracket's end, not the
+    eigenvalue)."""
+    check_int("k", k, lo=1, hi=eq.theta.shape[0] - 2)
     K = hessian(eq)
     lam = _kkt.smallest_eigenvalues(K, k)
     V = _kkt.modes(K, lam)

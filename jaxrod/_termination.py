@@ -188,6 +188,7 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
     if jnp.zeros(()).dtype != jnp.float64 and not jax.config.jax_enable_x64:
         raise ValueError("termination_gap needs float64; enable it with "
                          "jax.config.update('jax_enable_x64', True)")
+    check_param("grid", grid, lo=0.0, hi=1.0)
     grid = sorted(float(g) for g in grid)
     if not grid or grid[0] <= 0.0 or grid[-1] >= 1.0:
         raise ValueError(f"grid must hold gaps in (0, 1), got {grid!r}")
