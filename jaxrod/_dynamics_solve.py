@@ -158,29 +158,30 @@ def _refine_peak(t, f):
 # energy error 1.1e-3 at dt = 1.8e-4 T but 1.3e-2 at 7.3e-4 T (v_s error 7e-4).
 DT_CAP = 2e-4
 # Past the snap (`stop_at_snap=False`) the strip slams into the other state and rings, with
-# waves of the crease's width and tensions of ~10^3 B/L^2 at the slam (measured at Psi0 = 30
-# deg, G/L = 0.5, s0 = 0.02): the step of the snap itself (courant 0.45) then goes unstable
-# ~0.1 T after the crossing, and courant 0.15 at N = 50 leaves a 5 % energy error. The ringing
-# step is min(RING_COURANT h^2, DT_RING) T; measured over 6 T of ringing (energy error relative
-# to the start energy): 8e-5 at N = 50, 6.5e-4 at N = 100 (dt = 1e-5), see tests/test_long_horizon.py.
-RING_COURANT = 0.2
-DT_RING = 1e-5
+# tensions of ~10^3 B/L^2 at the slam and its energy spreading into the grid-scale bending
+# modes (measured at Psi0 = 30 deg, G/L = 0.5, s0 = 0.02): the step of the snap itself
+# (courant 0.45) goes unstable ~0.1 T after the crossing, and the energy error of a stable
+# step grows like (omega_max dt)^2 = (4 courant)^2 at any N (6 T of ringing: 1.2e-2 at
+# courant 0.1, N = 100; 6.5e-4 at courant 0.025, N = 50 and 100). The ringing step is
+# RING_COURANT h^2 (capped at DT_CAP): energy error 3.6e-3 over 6 T at N = 100
+# (tests/test_long_horizon.py), at 9x the steps of the snap's own step.
+RING_COURANT = 0.05
 # RATTLE steps per diffrax step at the automatic step (see `simulate`).
 DEFAULT_SUBSTEPS = 4
 
 
-def _rattle_dt_natural(scene, courant, cap=DT_CAP):
+def _rattle_dt_natural(scene, courant):
     """RATTLE's largest step in units of T (static: from the mesh fractions)."""
     frac_min = float(np.min(np.diff(np.asarray(scene.mesh.fractions))))
-    return min(courant * frac_min**2, cap)
+    return min(courant * frac_min**2, DT_CAP)
 
 
-def _default_n_fine(scene, solver, dt, t1, courant, substeps=1, cap=DT_CAP):
+def _default_n_fine(scene, solver, dt, t1, courant, substeps=1):
     """16384 samples; for RATTLE without `dt`, one per (macro) step (natural units, at most
     2^19, at least 2048), so its step is its largest one rather than a divisor of the grid."""
     if solver not in FIXED_STEP or dt is not None or not isinstance(t1, (int, float)) or not 0 < courant < 0.5:
         return 16384
-    return int(min(max(math.ceil(t1 / (substeps * _rattle_dt_natural(scene, courant, cap))) + 1, 2048), 2**19))
+    return int(min(max(math.ceil(t1 / (substeps * _rattle_dt_natural(scene, courant))) + 1, 2048), 2**19))
 
 
 def _verdict(sol, event_on, finite):
@@ -214,10 +215,10 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     `frame_window` (t_a, t_b) the span of the `n_frames` frames (default (0, t1));
     `courant` (`"rattle"` only, when `dt` is None): the step is the largest
     $\Delta t\le\min($`courant`$\,(h_{\min}/L)^2,\ 2\cdot10^{-4})\,T$, $T=L^2\sqrt{\lambda/B}$
-    (the cap `DT_CAP` matters below N ~ 48; default `courant` 0.45) when the run stops at the
-    snap, and $\min($`courant`$\,(h_{\min}/L)^2,\ 10^{-5})\,T$ (default `courant` 0.2,
-    `RING_COURANT`, `DT_RING`) when it goes on past it (`stop_at_snap=False`: the slam and the
-    ringing need the smaller step, see `DT_RING`), in either case the largest that divides the fine-grid spacing
+    (the cap `DT_CAP` matters below N ~ 48 at courant 0.45), with `courant` 0.45 by default when
+    the run stops at the snap and 0.05 (`RING_COURANT`) when it goes on past it
+    (`stop_at_snap=False`: the slam and the ringing need the smaller step, see
+    `RING_COURANT`); the step is the largest that divides the fine-grid spacing
     $t_1/(n_{fine}-1)$, so every fine-grid sample is a step point (no interpolation error in
     $v_s$ or the energies; by default `n_fine` is one sample per step); RATTLE is stable
     below 0.5 (the highest bending mode $4\sqrt{B/\lambda}/h^2$). `substeps` (`"rattle"`
@@ -262,11 +263,10 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     y0 = (jnp.stack([theta0, omega0]), jnp.zeros((), dtype))
     d = discretize(scene)
     args = (scene, protocol, dissipation, jnp.asarray(baumgarte, dtype), d)
-    cap = DT_CAP if stop_at_snap else DT_RING
     if courant is None:
         courant = 0.45 if stop_at_snap else RING_COURANT
     if n_fine is None:
-        n_fine = _default_n_fine(scene, solver, dt, t1, courant, substeps, cap)
+        n_fine = _default_n_fine(scene, solver, dt, t1, courant, substeps)
     ts = jnp.linspace(0.0, t1, n_fine)
     if frame_window is None:
         frame_window = (0.0, t1)
@@ -323,14 +323,14 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
         if not 0.0 < courant < 0.5:
             raise ValueError(f"courant must lie in (0, 0.5) (RATTLE's stability limit), got {courant!r}")
         T = st.length**2 * jnp.sqrt(st.line_density / st.bending_stiffness)
-        dt_max = substeps * _rattle_dt_natural(scene, courant, cap) * T
+        dt_max = substeps * _rattle_dt_natural(scene, courant) * T
         grid = t1 / (n_fine - 1)
         dt = grid / jnp.ceil(grid / dt_max)
         if max_steps is None:
             steps = 0
             if isinstance(t1, (int, float)):  # natural units L = B = lambda = 1
                 g = t1 / (n_fine - 1)
-                steps = (n_fine - 1) * math.ceil(g / (substeps * _rattle_dt_natural(scene, courant, cap)))
+                steps = (n_fine - 1) * math.ceil(g / (substeps * _rattle_dt_natural(scene, courant)))
             max_steps = max(200_000, steps + 64)
     if max_steps is None:
         max_steps = 200_000

@@ -5,7 +5,10 @@ Snap up: start in the down state at $\alpha=0$, increase $\alpha$ along the bran
 changes. Snap down: start in the up state, decrease $\alpha$. When the down state does
 not exist at $\alpha=0$ (tight folds at large gaps), the snap-up path starts from the
 state the snap-down path reached at its most negative angle, i.e. the other half of the
-quasi-static hysteresis protocol.
+quasi-static hysteresis protocol, and says so (`start_result` is `start_substituted`).
+A loss of stability at a fold is a snap however small the jump; at a branch point a
+landing close by means a supercritical branch is followed (see `_path`). The critical
+and landed states are checked for self-intersection (`jaxrod.self_intersects`).
 
 The critical point between the last stable and the first unstable point is refined by
 bisection on the arclength along the stable point's tangent (each trial is a corrector

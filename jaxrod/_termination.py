@@ -17,14 +17,14 @@ stability". Each path (snap up, snap down) is located in two stages:
    "continuation_cusp", "cusp" or "state_fold"); otherwise `gap_*` is the bisection value
    ("bisection").
 
-The two differ where the jump shrinks continuously to zero (a cusp): `snap_angles` counts
-a loss of stability as a snap only when the relaxed landing state lies more than
-`jaxrod._snap.JUMP_DISTANCE` ($L^2$ norm of the angle field) away (otherwise it follows
-the new stable branch, as at a supercritical branch point), so its criterion stops ~1e-3
-in $G/L$ below the cusp, where the fold pair, and with it every loss of stability on the
-path, ends (measured at n = 100: 0.63760 vs 0.63852 at 30 deg). The reported `jump_*`
-(the fold height change at $G^\ast_-$) says how large the snap still is there. Where the
-start state is lost, the two agree to the bisection tolerance.
+At a cusp the two agree to the bisection tolerance: `snap_angles` counts every loss of
+stability at a fold as a snap however small its jump (MODEL.md), so its criterion holds up
+to the cusp, where the fold pair, and with it every loss of stability on the path, ends
+(`tests/test_verdicts.py` checks both sides of the cusp at 60 deg). Only at a branch point
+does a small jump (a landing less than `jaxrod._snap.JUMP_DISTANCE` away, $L^2$ norm of
+the angle field) mean "no snap yet": the strip follows the new stable branch (supercritical).
+The reported `jump_*` (the fold height change at $G^\ast_-$) says how large the snap still
+is there. Where the start state is lost, the two agree to the bisection tolerance too.
 
 What ends each path (`reason_*`):
 - `"cusp"`: just below $G^\ast$ the path loses stability at a fold and the jump is small

@@ -1,0 +1,134 @@
+"""Snap paths say what they are: a fold is a snap however small its jump, a substituted or
+missing start state is named, a state through itself is flagged, a failed refinement says
+its alpha_c has no derivative, and the extrapolated paths carry the codes of both meshes.
+
+All paths run at N = 100 (one compiled `snap_angles`, shared by every scene here)."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxrod as jr
+from jaxrod._snap import KIND_FOLD, _polish
+from jaxrod._continuation import SymmetricAlpha
+
+N = 100
+OK = jr.RESULTS.successful
+
+
+def _snap(psi0, gap, **kw):
+    return jr.snap_angles(jr.make_scene(psi0_deg=psi0, gap=gap, n=N), **kw)
+
+
+@pytest.fixture(scope="module")
+def cusp_60():
+    """The cusp of the snap-down fold pair at Psi0 = 60 deg, solved on its own extended
+    system (`jr.cusp_point`) from the fold at G/L = 0.76: the gap where that path stops
+    snapping, computed independently of the snap criterion."""
+    sc = jr.make_scene(psi0_deg=60, gap=0.76, n=N)
+    p = jr.snap_angles(sc).down
+    assert int(p.kind) == KIND_FOLD and p.result == OK
+    cp = jr.cusp_point(sc, p.theta_before, p.force_before, p.alpha_c, p.mode)
+    assert cp.result == OK
+    return float(cp.gap)
+
+
+def test_fold_with_a_small_jump_is_a_snap(cusp_60):
+    """Between the old jump criterion's end (G/L = 0.76115) and the cusp the down path
+    loses stability at a fold and lands less than 0.1 rad away: that is a snap."""
+    g = 0.7618
+    assert g < cusp_60
+    p = _snap(60, g).down
+    assert bool(p.snaps) and int(p.kind) == KIND_FOLD and p.result == OK
+    assert 0 < float(p.jump) < 0.1, float(p.jump)
+    assert np.isfinite(float(p.alpha_c)) and -62 < np.degrees(float(p.alpha_c)) < -57
+    # the landed state is a different, stable equilibrium past alpha_c
+    sc = jr.make_scene(psi0_deg=60, gap=g, n=N, alpha_deg=float(np.degrees(p.alpha_c)) - 0.06)
+    eq = jr.solve_equilibrium(sc, p.theta_after, p.force_after)
+    assert eq.result == OK and int(eq.num_unstable) == 0
+    assert float(jnp.max(jnp.abs(eq.theta - p.theta_after))) < 1e-3
+
+
+def test_snapping_ends_at_the_cusp(cusp_60):
+    """snap_angles and the cusp agree on where the down path stops snapping."""
+    below = _snap(60, cusp_60 - 3e-4).down
+    above = _snap(60, cusp_60 + 3e-4).down
+    assert bool(below.snaps) and below.result == OK and int(below.kind) == KIND_FOLD
+    assert not bool(above.snaps) and above.result == OK
+    assert np.isnan(float(above.alpha_c)) and np.isnan(float(above.jump))
+
+
+def test_substituted_start_is_named():
+    """At Psi0 = 30 deg, G/L = 0.8 the down state does not exist at alpha = 0: the up
+    path's start is the snap-down path's end, and says so."""
+    r = _snap(30, 0.8)
+    down_state = jr.initial_state(jr.make_scene(psi0_deg=30, gap=0.8, n=N), "down")
+    assert down_state.result == jr.RESULTS.state_not_found
+    assert r.up.start_result == jr.RESULTS.start_substituted
+    assert r.down.start_result == OK  # the up state exists
+    # where both states exist nothing is substituted
+    r2 = _snap(30, 0.5)
+    assert r2.up.start_result == OK and r2.down.start_result == OK
+
+
+def _crosses_numpy(theta, h):
+    """Independent crossing test: do two segments |i - j| >= 2 intersect properly?"""
+    t = np.asarray(theta)
+    x = np.concatenate([[[0.0, 0.0]], np.cumsum(h[:, None] * np.stack([np.cos(t), np.sin(t)], 1), 0)])
+    n = len(t)
+    for i in range(n):
+        for j in range(i + 2, n):
+            p, r = x[i], x[i + 1] - x[i]
+            q, s = x[j], x[j + 1] - x[j]
+            den = r[0] * s[1] - r[1] * s[0]
+            if abs(den) < 1e-14:
+                continue
+            u = ((q - p)[0] * s[1] - (q - p)[1] * s[0]) / den
+            v = ((q - p)[0] * r[1] - (q - p)[1] * r[0]) / den
+            if 0 <= u <= 1 and 0 <= v <= 1:
+                return True
+    return False
+
+
+def test_states_through_themselves_are_flagged():
+    """At G/L = 0.1 the critical states of both paths pass through themselves (checked
+    here by an independent crossing test); their paths carry `self_intersecting`, and a
+    path of a moderate gap does not."""
+    r = _snap(30, 0.1)
+    h = np.full(N, 1.0 / N)
+    for p in (r.up, r.down):
+        assert _crosses_numpy(p.theta_before, h)
+        assert p.result == jr.RESULTS.self_intersecting
+    r2 = _snap(60, 0.5)
+    for p in (r2.up, r2.down):
+        assert not _crosses_numpy(p.theta_before, h) and p.result == OK
+        assert float(jr.clearance(p.theta_before, jr.make_scene(n=N))) > 0
+
+
+def test_failed_refinement_says_no_derivative():
+    """Where the extended-system refinement is not accepted (here: the bisection value is
+    moved 1e-4 rad away, outside its 1e-6 rad acceptance), alpha_c stays the bisection
+    value and the path reads `derivative_unavailable`, not success."""
+    sc = jr.make_scene(psi0_deg=60, gap=0.5, n=N)
+    raw = jr.snap_angles(sc, polish=False).up
+    assert raw.result == OK and bool(raw.snaps)
+    good = _polish(sc, raw, SymmetricAlpha())
+    assert good.result == OK and good.refine_result == OK
+    moved = eqx.tree_at(lambda p: p.alpha_c, raw, raw.alpha_c + 1e-4)
+    bad = _polish(sc, moved, SymmetricAlpha())
+    assert bad.result == jr.RESULTS.derivative_unavailable
+    assert float(bad.alpha_c) == float(moved.alpha_c)
+
+
+def test_extrapolated_paths_carry_both_meshes_codes():
+    """A continuation cut short on both meshes is not a clean 'does not snap'."""
+    sc = jr.make_scene(psi0_deg=60, gap=0.5, n=N // 2)
+    x = jr.snap_angles_extrapolated(sc, settings=jr.Continuation(max_points=3), polish=False)
+    for e in (x.up, x.down):
+        assert e.result == jr.RESULTS.continuation_incomplete
+        assert e.result_coarse == jr.RESULTS.continuation_incomplete
+        assert e.result_fine == jr.RESULTS.continuation_incomplete
+    good = jr.snap_angles_extrapolated(sc, polish=False)
+    for e in (good.up, good.down):
+        assert e.result == OK and e.result_coarse == OK and e.result_fine == OK and bool(e.consistent)
