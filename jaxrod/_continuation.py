@@ -34,6 +34,7 @@ from ._energy.geometry import discretize
 from ._energy.lagrangian import lagrangian, positions
 from ._equilibrium import _float_scene
 from ._misc import check_bool, check_int, check_number, check_sign, is_concrete
+from ._solution import RESULTS
 
 
 def require_float64(dtype, what):
@@ -139,6 +140,13 @@ class Branch(eqx.Module):
     ds: Array
     count: Array
     stop: Array
+
+    @property
+    def result(self):
+        """`continuation_incomplete` where the branch stopped on a full buffer (`stop` 0) or a
+        step below `ds_min` (3), else `successful` (the bound, 1, or a loss of stability, 2)."""
+        return RESULTS.where((self.stop == 0) | (self.stop == 3), RESULTS.continuation_incomplete,
+                             RESULTS.successful)
 
 
 def _pieces(scene, parameter):

@@ -82,6 +82,13 @@ class CriticalCurve(eqx.Module):
     force: Array
     mode: Array
 
+    @property
+    def result(self):
+        """`continuation_incomplete` where the curve ended because its corrector failed
+        (`end_reason` 3) or its buffer filled (4), else `successful` (a turn or the bound)."""
+        return RESULTS.where((self.end_reason == 3) | (self.end_reason == 4), RESULTS.continuation_incomplete,
+                             RESULTS.successful)
+
 
 def _hermite(fa, fb, da, db):
     """Quadratic and cubic coefficients of the Hermite cubic on u in [0, 1] with values

@@ -64,6 +64,12 @@ class Hysteresis(eqx.Module):
     energy_before_down: Array
     energy_after_down: Array
 
+    @property
+    def result(self):
+        """The loop's code: the snap-up path's if it is not successful, else the snap-down's."""
+        up, down = self.snap.up.result, self.snap.down.result
+        return RESULTS.where(up != RESULTS.successful, up, down)
+
 
 def _energy_at(scene, theta, force, alpha):
     sc = SymmetricAlpha().set(scene, alpha)

@@ -142,7 +142,10 @@ class SpeedRun(eqx.Module):
     trajectory's value, whatever the checks say), `ok`, `alpha_c` (rad), `kind`,
     `t_peak`, `t_end`, `energy_drift`, `num_steps`, and the checks: `valid` (the path snaps
     and its critical point was refined), `snapped` (the fold crossed y = 0 within `t1`),
-    `stopped` (the run ended at the snap's overshoot before `t1`), `peak_before_stop`."""
+    `stopped` (the run ended at the snap's overshoot before `t1`), `peak_before_stop`;
+    `result`: `successful` where `v_s` is valid, else the snap path's code (or `no_snap`,
+    or `derivative_unavailable` where its refinement failed), the trajectory's code,
+    `snap_not_resolved`, or `energy_drift` (above `max_drift`)."""
 
     v_s: jax.Array
     v_s_raw: jax.Array
@@ -157,6 +160,7 @@ class SpeedRun(eqx.Module):
     snapped: jax.Array
     stopped: jax.Array
     peak_before_stop: jax.Array
+    result: RESULTS
 
 
 def _run(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
@@ -191,11 +195,20 @@ def _run(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
     spacing = t1 / (n_fine - 1)
     stopped = tr.t_end < t1 - 2 * dt
     peak_ok = tr.t_peak < tr.t_end - 3 * spacing
-    ok = valid & tr.snapped & stopped & peak_ok & (tr.energy_drift < max_drift) & jnp.isfinite(tr.v_s)
+    ok = (valid & tr.snapped & stopped & peak_ok & (tr.energy_drift < max_drift) & jnp.isfinite(tr.v_s)
+          & (tr.result == RESULTS.successful))
     v_raw = tr.v_s / T
+    good = RESULTS.successful
+    path_code = RESULTS.where(path.result != good, path.result,
+                              RESULTS.where(path.snaps, RESULTS.derivative_unavailable, RESULTS.no_snap))
+    result = RESULTS.where(
+        ~valid, path_code,
+        RESULTS.where(tr.result != good, tr.result,
+                      RESULTS.where(~(tr.snapped & stopped & peak_ok), RESULTS.snap_not_resolved,
+                                    RESULTS.where(ok, good, RESULTS.energy_drift))))
     return SpeedRun(jnp.where(ok, v_raw, jnp.nan), v_raw, ok, jnp.where(valid, path.alpha_c, jnp.nan),
                     path.kind, tr.t_peak * T, tr.t_end * T, tr.energy_drift, tr.num_steps, valid, tr.snapped,
-                    stopped, peak_ok)
+                    stopped, peak_ok, result)
 
 
 @eqx.filter_custom_jvp

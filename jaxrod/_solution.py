@@ -46,6 +46,13 @@ class RESULTS(eqx.Enumeration):
         "differs: near a termination gap, or where a fold and a branch point cross): nothing was "
         "extrapolated; alpha_c is the fine mesh's value and error the meshes' difference. Refine the mesh."
     )
+    no_snap = (
+        "The quasi-static path does not snap here, so there is no snap (no brink, no snap speed)."
+    )
+    snap_not_resolved = (
+        "The run did not resolve the snap within t1 (the fold did not cross y = 0, the run did not reach "
+        "the overshoot, or the speed peak lies at the end of the run): raise t1."
+    )
     energy_drift = (
         "The undamped run's energy balance E_k + V - W left its start value by more than energy_tol (relative "
         "to the energy scale): the step no longer resolves the motion, and the run was stopped there. Use a "
