@@ -7,9 +7,12 @@ with `set_defaults`. Shared pieces: `jaxrod._cli.add_scene_args`, `make_scene_fr
 
 `jaxrod snap` integrates one snap (brink, ramp or asymmetric scene) and prints v_s in
 units of v* (and in m/s when the strip's material is given); `jaxrod speed-plane` runs
-the grid Psi0 x G/L of brink snaps, appends each point to `DIR/speed_plane.csv` as it is
-done (a rerun skips the points already there), fits v_s/v* = v_m - a G/L - b Psi0 and
-draws `DIR/speed_plane.png`.
+the grid Psi0 x G/L of brink snaps, writes each point to `DIR/speed_plane.csv` as it is
+done (the whole file rewritten atomically: temp file, then `os.replace`; each row carries
+the settings it was computed with), fits v_s/v* = v_m - a G/L - b Psi0 and draws
+`DIR/speed_plane.png`. A rerun reads back the points already there with the same
+settings and computes only the others; a torn or unreadable row is dropped and its
+point recomputed.
 """
 
 from __future__ import annotations
@@ -54,7 +57,9 @@ def register(sub):
     p.set_defaults(handler=_cmd_snap)
 
     q = sub.add_parser("speed-plane", help="v_s over Psi0 x G/L (brink snaps), CSV + fit + figure; resumable")
-    q.add_argument("--out", metavar="DIR", default="jaxrod-speed-plane")
+    q.add_argument("--out", metavar="DIR", default="jaxrod-speed-plane",
+                   help="output directory; a rerun resumes from DIR/speed_plane.csv, reusing the points computed "
+                        "with the same settings (default %(default)s)")
     q.add_argument("--psi0", default="30,60,90,120,180", help="comma-separated fold angles, deg")
     q.add_argument("--gaps", default="0.3,0.4,0.5,0.6,0.7", help="comma-separated G/L")
     q.add_argument("--n", type=int, default=60, help="segments (default 60)")
@@ -177,8 +182,13 @@ def _cmd_snap(args):
     return EXIT_OK if rec["converged"] else EXIT_NOT_CONVERGED
 
 
-FIELDS = ["psi0_deg", "gap", "n", "snaps", "alpha_c_deg", "v_s", "t_snap", "kinetic_energy_peak",
-          "bending_energy_before", "num_steps"]
+# One row per grid point. The settings a row was computed with are columns of the row
+# itself (`SETTINGS`): a rerun reuses exactly the rows of its own settings and computes the
+# rest, rows of other settings stay in the file untouched (and out of this run's fit).
+SETTINGS = ["n", "s0", "direction", "nudge", "solver", "rtol", "t1"]
+RESULT_FIELDS = ["snaps", "alpha_c_deg", "v_s", "t_snap", "kinetic_energy_peak", "bending_energy_before",
+                 "num_steps"]
+FIELDS = ["psi0_deg", "gap", *SETTINGS, *RESULT_FIELDS]
 
 
 def fit_plane(rows):
@@ -198,20 +208,83 @@ def fit_plane(rows):
     return coef.tolist(), np.sqrt(np.diag(cov)).tolist(), float(np.sqrt(np.mean(res**2)))
 
 
+def _settings(args):
+    return dict(n=int(args.n), s0=float(args.s0), direction=args.direction, nudge=float(args.nudge),
+                solver=args.solver, rtol=float(args.rtol), t1=float(args.t1))
+
+
+def _parse_row(r):
+    """One CSV row (a list of strings in FIELDS order) -> dict; ValueError when it is not a
+    complete row this code wrote (a row torn by an interrupted write, an edited file)."""
+    if len(r) != len(FIELDS):
+        raise ValueError(f"{len(r)} fields instead of {len(FIELDS)}")
+    r = dict(zip(FIELDS, r))
+
+    def num(text, kind=float):
+        if text in ("", "None", "nan"):
+            return None
+        return kind(text)
+
+    if r["direction"] not in ("up", "down") or r["snaps"] not in ("True", "False") or not r["solver"]:
+        raise ValueError("bad direction, snaps or solver")
+    row = dict(psi0_deg=float(r["psi0_deg"]), gap=float(r["gap"]), n=int(r["n"]), s0=float(r["s0"]),
+               direction=r["direction"], nudge=float(r["nudge"]), solver=r["solver"], rtol=float(r["rtol"]),
+               t1=float(r["t1"]), snaps=r["snaps"] == "True", num_steps=num(r["num_steps"], int))
+    row.update({k: num(r[k]) for k in RESULT_FIELDS if k not in row})
+    return row
+
+
 def _read_rows(path):
+    """The complete rows of `path` and how many lines were dropped as unreadable (`[]`, 0
+    when there is no file). A last line without its newline is a torn write and dropped.
+    A file whose header is not FIELDS (an older jaxrod's, without the settings columns, or
+    not this command's) is refused with one line: its rows cannot be matched to settings."""
     if not os.path.exists(path):
-        return []
+        return [], 0
+    with open(path, newline="") as fh:
+        text = fh.read()
+    lines = text.splitlines(keepends=True)
+    dropped = 0
+    if lines and not lines[-1].endswith("\n"):  # torn by a kill during the write
+        lines.pop()
+        dropped += 1
+    if not lines:
+        return [], dropped
+    records = list(csv.reader(lines))
+    if records[0] != FIELDS:
+        raise InputError(f"out: {path} is not a speed-plane CSV with the columns {','.join(FIELDS)} (an older "
+                         "jaxrod's has no settings columns): move it away or choose another --out")
     rows = []
-    with open(path) as fh:
-        for r in csv.DictReader(fh):
-            rows.append(dict(psi0_deg=float(r["psi0_deg"]), gap=float(r["gap"]), n=int(r["n"]),
-                             snaps=r["snaps"] == "True",
-                             **{k: (float(r[k]) if r[k] not in ("", "None", "nan") else None)
-                                for k in FIELDS[4:]}))
-    return rows
+    for r in records[1:]:
+        try:
+            rows.append(_parse_row(r))
+        except (ValueError, TypeError):
+            dropped += 1
+    return rows, dropped
+
+
+def _write_atomic(path, write):
+    """`write(fh)` into `path` + ".part", then `os.replace` onto `path`: a kill at any
+    moment leaves either the old file or the new one, never a part of one."""
+    tmp = path + ".part"
+    with open(tmp, "w", newline="") as fh:
+        write(fh)
+    os.replace(tmp, path)
+
+
+def _write_rows(path, rows):
+    def write(fh):
+        w = csv.DictWriter(fh, FIELDS)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: r.get(k) for k in FIELDS})
+
+    _write_atomic(path, write)
 
 
 def _cmd_speed_plane(args):
+    import sys
+
     import numpy as np
     from tqdm import tqdm
 
@@ -233,39 +306,48 @@ def _cmd_speed_plane(args):
     except OSError as e:
         raise InputError(f"out: cannot create {args.out!r}: {e.strerror or e}") from None
     path = os.path.join(args.out, "speed_plane.csv")
-    rows = _read_rows(path)
-    done = {(r["psi0_deg"], r["gap"], r["n"]) for r in rows}
-    todo = [(p, g) for p in psis for g in gaps if (p, g, args.n) not in done]
-    new = not os.path.exists(path)
-    with open(path, "a", newline="") as fh:
-        w = csv.DictWriter(fh, FIELDS)
-        if new:
-            w.writeheader()
-        for p, g in tqdm(todo, desc="speed plane", unit="strip"):
-            scene = _array_leaves(jr.make_scene(p, g, 0, s0=args.s0, n=args.n))
-            snap = jr.snap_angles(scene)
-            path_ = snap.up if args.direction == "up" else snap.down
-            row = dict(psi0_deg=p, gap=g, n=args.n, snaps=bool(path_.snaps))
-            if row["snaps"]:
-                start, tr = jr.snap_dynamics(scene, args.direction, kind="brink", nudge=args.nudge, snap=snap,
-                                             solver=args.solver, rtol=args.rtol, atol=args.rtol, t1=args.t1)
-                row.update(alpha_c_deg=float(np.degrees(start.alpha_c)), v_s=float(tr.v_s),
-                           t_snap=float(tr.t_cross), kinetic_energy_peak=float(tr.kinetic_peak),
-                           bending_energy_before=float(start.bending_before), num_steps=int(tr.num_steps))
-                row["snaps"] = bool(tr.snapped)
-            w.writerow(row)
-            fh.flush()
-            rows.append({k: row.get(k) for k in FIELDS})
-    rows = [r for r in rows if r["n"] == args.n and r["psi0_deg"] in psis and r["gap"] in gaps]
-    out = dict(points=len(rows), snapping=sum(bool(r["snaps"]) for r in rows), csv=path)
+    settings = _settings(args)
+    mine = lambda r: all(r[k] == v for k, v in settings.items())  # noqa: E731
+    rows, dropped = _read_rows(path)
+    done = {(r["psi0_deg"], r["gap"]) for r in rows if mine(r)}
+    grid = [(p, g) for p in psis for g in gaps]
+    todo = [pt for pt in grid if pt not in done]
+    if dropped:
+        print(f"jaxrod speed-plane: dropped {dropped} unreadable row(s) of {path} (an interrupted write?); "
+              "their points are recomputed", file=sys.stderr)
+    print(f"jaxrod speed-plane: {len(grid) - len(todo)} of {len(grid)} points read back from {path}, "
+          f"{len(todo)} to compute", file=sys.stderr)
+    if dropped or not os.path.exists(path):
+        _write_rows(path, rows)
+    computed = []
+    for p, g in tqdm(todo, desc="speed plane", unit="strip"):
+        scene = _array_leaves(jr.make_scene(p, g, 0, s0=args.s0, n=args.n))
+        snap = jr.snap_angles(scene)
+        path_ = snap.up if args.direction == "up" else snap.down
+        row = dict(psi0_deg=p, gap=g, **settings, snaps=bool(path_.snaps))
+        if row["snaps"]:
+            start, tr = jr.snap_dynamics(scene, args.direction, kind="brink", nudge=args.nudge, snap=snap,
+                                         solver=args.solver, rtol=args.rtol, atol=args.rtol, t1=args.t1)
+            row.update(alpha_c_deg=float(np.degrees(start.alpha_c)), v_s=float(tr.v_s),
+                       t_snap=float(tr.t_cross), kinetic_energy_peak=float(tr.kinetic_peak),
+                       bending_energy_before=float(start.bending_before), num_steps=int(tr.num_steps))
+            row["snaps"] = bool(tr.snapped)
+        rows.append({k: row.get(k) for k in FIELDS})
+        _write_rows(path, rows)  # the whole file, atomically, after every point
+        computed.append([p, g])
+    first, wanted = {}, set(grid)
+    for r in rows:  # this run's rows in grid order (the first where a point is there twice)
+        if mine(r) and (r["psi0_deg"], r["gap"]) in wanted:
+            first.setdefault((r["psi0_deg"], r["gap"]), r)
+    rows = [first[pt] for pt in grid]
+    out = dict(points=len(rows), snapping=sum(bool(r["snaps"]) for r in rows), csv=path, computed_points=computed)
     if out["snapping"] >= 4:
         coef, err, rms = fit_plane(rows)
         out.update(fit=dict(v_m=coef[0], a=coef[1], b=coef[2], stderr=err, rms=rms),
                    paper=dict(v_m=PAPER_FIT[0], a=PAPER_FIT[1], b=PAPER_FIT[2]))
         _plot_plane(rows, coef, os.path.join(args.out, "speed_plane.png"))
         out["figure"] = os.path.join(args.out, "speed_plane.png")
-    with open(os.path.join(args.out, "speed_plane_fit.json"), "w") as fh:
-        json.dump(out, fh, indent=1)
+    _write_atomic(os.path.join(args.out, "speed_plane_fit.json"), lambda fh: json.dump(out, fh, indent=1))
     print(json.dumps(out))
     return EXIT_OK
 

@@ -62,7 +62,8 @@ def _cmd_hysteresis(args):
             jr.plot_hysteresis(h, args.plot, title=title)
         except OSError as e:
             raise InputError(f"plot: cannot write {args.plot!r}: {e.strerror or e}") from None
-    ok = rec["start_up"] == "successful" or rec["start_down"] == "successful"
+    bad = sorted({rec[f"{k}_{n}"] for k in ("start", "result") for n in ("up", "down")} - {"successful"})
+    ok = not bad
     if args.json:
         print(json.dumps(rec))
     else:
@@ -75,6 +76,8 @@ def _cmd_hysteresis(args):
                   f"{rec[f'bending_energy_after_{name}']:.4f}"))
         if args.plot:
             print(f"plot: {args.plot}")
+    if bad:
+        print(f"jaxrod hysteresis: path result {', '.join(bad)} (see jaxrod.RESULTS)", file=sys.stderr)
     return EXIT_OK if ok else EXIT_NOT_CONVERGED
 
 
@@ -141,14 +144,24 @@ def _cmd_phase_diagram(args):
     ok = int(jr.RESULTS.successful._value)
     rec["unknown_paths"] = int(sum(np.sum((ds[f"start_{k}"].values == ok) & (ds[f"result_{k}"].values != ok))
                                    for k in ("up", "down")))
+    # every code but success, counted over the grid (the codes themselves are in the file)
+    names = {int(getattr(jr.RESULTS, nm)._value): nm for nm in jr.RESULTS._name_to_item}
+    flagged = {}
+    for k in ("start", "result"):
+        for d in ("up", "down"):
+            for v in ds[f"{k}_{d}"].values.ravel():
+                if int(v) != ok:
+                    key = f"{k}_{d}: {names.get(int(v), int(v))}"
+                    flagged[key] = flagged.get(key, 0) + 1
+    rec["flagged"] = flagged
     if args.json:
         print(json.dumps(rec))
     else:
         print(f"wrote {rec['netcdf']} and {png} ({len(psis)} x {len(gaps)} points, {wall:.1f} s; "
               f"{len(rec['computed_chunks'])} chunks computed, the rest resumed)")
-    if rec["unknown_paths"]:
-        print(f"jaxrod phase-diagram: {rec['unknown_paths']} path(s) ended before a loss of stability or the "
-              "bound (result_up/result_down in the NetCDF file)", file=sys.stderr)
+    if flagged:
+        print("jaxrod phase-diagram: points not successful (codes in the NetCDF file): "
+              + ", ".join(f"{k} x{v}" for k, v in sorted(flagged.items())), file=sys.stderr)
     return EXIT_OK
 
 

@@ -163,7 +163,7 @@ DT_CAP = 2e-4
 # (courant 0.45) goes unstable ~0.1 T after the crossing, and the energy error of a stable
 # step grows like (omega_max dt)^2 = (4 courant)^2 at any N (6 T of ringing: 1.2e-2 at
 # courant 0.1, N = 100; 6.5e-4 at courant 0.025, N = 50 and 100). The ringing step is
-# RING_COURANT h^2 (capped at DT_CAP): energy error 3.6e-3 over 6 T at N = 100
+# RING_COURANT h^2 (capped at DT_CAP): energy error 4.0e-3 over 5.6 T at N = 50, 3.6e-3 over 6 T at N = 100
 # (tests/test_long_horizon.py), at 9x the steps of the snap's own step.
 RING_COURANT = 0.05
 # RATTLE steps per diffrax step at the automatic step (see `simulate`).

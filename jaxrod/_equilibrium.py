@@ -270,6 +270,15 @@ def _solve_impl(scene, theta0, mu0, solver):
     return Equilibrium(t, m, result, steps, nneg, scene)
 
 
+def flag_contact(eq):
+    """`eq` with `result` set to `self_intersecting` where it converged to a state that
+    passes through itself (two non-neighbouring segments cross)."""
+    from ._contact import self_intersects
+
+    bad = (eq.result == RESULTS.successful) & self_intersects(eq.theta, eq.scene, force=eq.force)
+    return eqx.tree_at(lambda e: e.result, eq, RESULTS.where(bad, RESULTS.self_intersecting, eq.result))
+
+
 @eqx.filter_jit
 def solve_equilibrium(scene, theta0, mu0=None, *, solver: Newton = Newton(), throw: bool = False) -> Equilibrium:
     r"""Solve for an equilibrium of `scene` starting from angles `theta0`.
@@ -283,13 +292,14 @@ def solve_equilibrium(scene, theta0, mu0=None, *, solver: Newton = Newton(), thr
     - `throw`: raise (via `eqx.error_if`) if the result is not `successful`. Keep it
       `False` under `vmap` and read `eq.result` per member.
 
-    **Returns:** an [`jaxrod.Equilibrium`][]. Differentiable with respect to every float
-    leaf of `scene` (implicit function theorem).
+    **Returns:** an [`jaxrod.Equilibrium`][]; a converged state that passes through itself
+    (`jaxrod.self_intersects`) is `self_intersecting`. Differentiable with respect to every
+    float leaf of `scene` (implicit function theorem).
     """
     if not isinstance(solver, Newton):
         raise ValueError(f"solver must be a jaxrod.Newton, got {solver!r}")
     check_bool("throw", throw)
-    eq = _solve_impl(scene, theta0, mu0, solver)
+    eq = flag_contact(_solve_impl(scene, theta0, mu0, solver))
     if throw:
         eq = eqx.tree_at(lambda e: e.theta, eq,
                          eq.result.error_if(eq.theta, eq.result != RESULTS.successful))

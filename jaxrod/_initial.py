@@ -24,7 +24,7 @@ from jax import lax
 
 from ._energy.geometry import discretize, scene_dtype
 from ._energy.lagrangian import positions
-from ._equilibrium import Newton, _float_scene, solve_equilibrium
+from ._equilibrium import Newton, _float_scene, _solve_impl, flag_contact
 from ._misc import check_int
 from ._solution import RESULTS, Equilibrium
 
@@ -94,14 +94,15 @@ def initial_state(scene, state: str = "up", *, steps: int = 24, solver: Newton =
     `scene`, built from the flat buckled strip by homotopy (see the module docstring).
 
     **Returns:** an [`jaxrod.Equilibrium`][] whose `result` is `successful`, or
-    `state_not_found` when no deformation path reaches a stable state of that sign.
+    `state_not_found` when no deformation path reaches a stable state of that sign, or
+    `self_intersecting` when the state found passes through itself.
     """
     if state not in ("up", "down"):
         raise ValueError(f"state must be 'up' or 'down', got {state!r}")
     check_int("steps", steps, lo=1)
     if not isinstance(solver, Newton):
         raise ValueError(f"solver must be a jaxrod.Newton, got {solver!r}")
-    return _initial_state(scene, 1.0 if state == "up" else -1.0, steps=steps, solver=solver)
+    return flag_contact(_initial_state(scene, 1.0 if state == "up" else -1.0, steps=steps, solver=solver))
 
 
 def _initial_state(scene, sgn, *, steps: int = 24, solver: Newton = Newton()) -> Equilibrium:
@@ -116,14 +117,14 @@ def _initial_state(scene, sgn, *, steps: int = 24, solver: Newton = Newton()) ->
 
     def run_path(kind):
         s0 = _deformed(target, jnp.zeros((), dtype), jnp.zeros((), dtype))
-        eq0 = solve_equilibrium(s0, sgn * buckled_guess(s0, True), solver=solver)
+        eq0 = _solve_impl(s0, sgn * buckled_guess(s0, True), None, solver)
         ok0 = eq0.converged & eq0.stable & (sgn * _fold_height(eq0.theta, eq0.force, s0) > 0)
 
         def step(carry, u):
             t, m, ok = carry
             uc, ua = _path_params(kind, u)
             sc = _deformed(target, uc, ua)
-            eq = solve_equilibrium(sc, t, m, solver=solver)
+            eq = _solve_impl(sc, t, m, solver)
             return (eq.theta, eq.force, ok & _tracked(eq, sgn, t, sc)), None
 
         us = jnp.arange(1, steps + 1, dtype=dtype) / steps
@@ -134,7 +135,7 @@ def _initial_state(scene, sgn, *, steps: int = 24, solver: Newton = Newton()) ->
     best = jnp.argmax(oks)
     found = jnp.any(oks)
     # final polish on the target scene (also attaches implicit derivatives)
-    eq = solve_equilibrium(scene, ts[best], ms[best], solver=solver)
+    eq = _solve_impl(scene, ts[best], ms[best], solver)
     good = eq.converged & eq.stable & (sgn * _fold_height(eq.theta, eq.force, eq.scene) > 0)
     result = RESULTS.where(found & good, eq.result,
                            RESULTS.where(eq.converged | ~found, RESULTS.state_not_found, eq.result))

@@ -171,10 +171,15 @@ def _chunk_dataset(psi0_deg, gaps, values, attrs):
 
 
 def _chunk_path(out, psi0_deg):
-    return os.path.join(out, "chunks", f"psi0_{psi0_deg:.6g}.nc")
+    # 12 significant digits (the CLI rounds its ranges to 12): two fold angles that differ
+    # in the 7th digit get two files instead of overwriting each other's chunk on every run
+    return os.path.join(out, "chunks", f"psi0_{psi0_deg:.12g}.nc")
 
 
-def _read_chunk(path, attrs):
+def _read_chunk(path, attrs, psi0_deg, gaps):
+    """The finished chunk at `path` if it holds exactly this fold angle, these gaps and
+    settings (`attrs`: mesh, s0, grid, variables), every variable of shape (1, gaps); else
+    None, and the chunk is recomputed (a missing, truncated or foreign file alike)."""
     import xarray as xr
 
     if not os.path.exists(path):
@@ -184,7 +189,15 @@ def _read_chunk(path, attrs):
             ds = ds.load()
     except Exception:  # a truncated file from an interrupted write: recompute it
         return None
-    if any(ds.attrs.get(k) != v for k, v in attrs.items()):
+    try:
+        if any(ds.attrs.get(k) != v for k, v in attrs.items()):
+            return None
+        if (ds["psi0"].values.tolist() != [float(psi0_deg)]
+                or ds["gap"].values.tolist() != [float(g) for g in gaps]):
+            return None
+        if any(ds[k].dims != ("psi0", "gap") or ds[k].shape != (1, len(gaps)) for k in VARIABLES):
+            return None
+    except (KeyError, ValueError, TypeError):
         return None
     return ds
 
@@ -235,7 +248,7 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     g_arr = jnp.asarray(gaps, jnp.float64)
     s0_arr = jnp.asarray(float(s0), jnp.float64)
     batch = _resolve_batch(batch)
-    cached = {p: (_read_chunk(_chunk_path(out, p), attrs) if out is not None else None) for p in psis}
+    cached = {p: (_read_chunk(_chunk_path(out, p), attrs, p, gaps) if out is not None else None) for p in psis}
     todo = [p for p in psis if cached[p] is None]
     batched = {}
     if batch == "vmap" and todo:

@@ -43,7 +43,7 @@ from ._contact import self_intersects
 from ._critical import critical_point
 from ._energy.geometry import discretize
 from ._energy.lagrangian import positions
-from ._equilibrium import Newton, _float_scene, solve_equilibrium
+from ._equilibrium import Newton, _float_scene, _solve_impl
 from ._initial import _initial_state
 from ._misc import check_bool, check_int, check_number, run_if
 from ._solution import RESULTS, Equilibrium
@@ -148,7 +148,7 @@ def _land(scene, parameter, t, m, lam, v, direction, up_expected, solver):
     plus = _fh(scene, parameter, t + eps * v, m, lam)
     minus = _fh(scene, parameter, t - eps * v, m, lam)
     pick = jnp.where((plus > minus) == up_expected, 1.0, -1.0)
-    eq = solve_equilibrium(sc, t + pick * eps * v, m, solver=Newton(max_steps=200))
+    eq = _solve_impl(sc, t + pick * eps * v, m, Newton(max_steps=200))
     return eq.theta, eq.force, _fh(scene, parameter, eq.theta, eq.force, lam + direction * 1e-3), eq
 
 
@@ -333,8 +333,8 @@ def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, cont
         lam_end, t_end, m_end, down_snaps, down_alpha, t_after, m_after = prev
 
         def up_start(scene, lam_end, t_end, m_end, down_snaps, down_alpha, t_after, m_after):
-            alt_eq = solve_equilibrium(parameter.set(scene, lam_end), t_end, m_end)
-            land_eq = solve_equilibrium(parameter.set(scene, down_alpha - 1e-3), t_after, m_after)
+            alt_eq = _solve_impl(parameter.set(scene, lam_end), t_end, m_end, Newton())
+            land_eq = _solve_impl(parameter.set(scene, down_alpha - 1e-3), t_after, m_after, Newton())
             return jax.tree.map(lambda c, b: jnp.where(down_snaps, c, b), arrays(land_eq), arrays(alt_eq))
 
         has_down = down_eq.result == RESULTS.successful

@@ -84,9 +84,11 @@ def loglog_slope(x, y):
     return float(np.polyfit(np.log(np.asarray(x, float)), np.log(np.abs(np.asarray(y, float))), 1)[0])
 
 
-def run_notebook(name, timeout=600):
+def run_notebook(name, timeout=600, extra_cells=()):
     """Execute notebooks/NAME in quick mode (JAXROD_QUICK=1) with nbclient; returns the
-    executed notebook. Checks it was committed without outputs."""
+    executed notebook. Checks it was committed without outputs. `extra_cells`: sources of
+    code cells appended to the executed copy (the committed notebook is untouched), to
+    report what the kernel holds at the end (figures, variables) for the test to read."""
     import os
     from pathlib import Path
 
@@ -96,6 +98,7 @@ def run_notebook(name, timeout=600):
     nb_dir = Path(__file__).resolve().parent.parent / "notebooks"
     nb = nbformat.read(nb_dir / name, as_version=4)
     assert all(c.get("outputs", []) == [] for c in nb.cells if c.cell_type == "code"), "commit without outputs"
+    nb.cells += [nbformat.v4.new_code_cell(src) for src in extra_cells]
     old = os.environ.get("JAXROD_QUICK")
     os.environ["JAXROD_QUICK"] = "1"
     try:
@@ -112,3 +115,63 @@ def run_notebook(name, timeout=600):
 def notebook_text(nb):
     """Concatenated stream outputs of the code cells."""
     return "\n".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
+
+
+def notebook_record(nb, tag):
+    """The JSON object a notebook cell printed on a line `TAG {...}` (the last such line)."""
+    import json
+
+    lines = [ln for ln in notebook_text(nb).splitlines() if ln.startswith(tag + " ")]
+    assert lines, f"no {tag} line in the notebook's output"
+    return json.loads(lines[-1][len(tag) + 1:])
+
+
+def notebook_images(nb):
+    """The PNG images the notebook displayed (bytes), in order."""
+    import base64
+
+    return [base64.b64decode(o["data"]["image/png"]) for c in nb.cells if c.cell_type == "code"
+            for o in c.get("outputs", []) if "image/png" in o.get("data", {})]
+
+
+def alpha_c_benchmark(psi0_deg, gap, n=None):
+    """alpha_c (deg, up, down) of the committed convergence study
+    (benchmarks/results/convergence_alpha_c.json: uniform meshes N = 50, 100, 200, 400,
+    s0 = 0.02): the values on an N-segment mesh predicted by the least-squares fit
+    a + b / N^2 + c / N^4 to the four (n=None: the fit's limit a, the converged value),
+    and the kinds. The fit reproduces the four to < 1e-4 deg; at N = 40, just outside its
+    range, it agrees with a two-term fit to 0.015 deg (the predictions' uncertainty)."""
+    import json
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "benchmarks" / "results" / "convergence_alpha_c.json"
+    data = json.loads(path.read_text())["data"]["uniform"]
+    key = f"{psi0_deg:g}/{gap:g}"
+    ns = np.array([50.0, 100.0, 200.0, 400.0])
+    X = np.stack([np.ones(4), ns**-2, ns**-4], 1)
+    out = []
+    for k in (0, 1):
+        c = np.linalg.lstsq(X, np.array([data[f"{int(m)}"][key][k] for m in ns]), rcond=None)[0]
+        out.append(float(c[0] if n is None else c @ [1.0, n**-2.0, n**-4.0]))
+    return out[0], out[1], data["50"][key][2], data["50"][key][3]
+
+
+def crosses(theta, h):
+    """Independent self-crossing test in numpy: do two segments |i - j| >= 2 of the chain
+    with angles `theta` and lengths `h` (node 0 at the origin) intersect?"""
+    t = np.asarray(theta, float)
+    h = np.asarray(h, float)
+    x = np.concatenate([[[0.0, 0.0]], np.cumsum(h[:, None] * np.stack([np.cos(t), np.sin(t)], 1), 0)])
+    n = len(t)
+    for i in range(n):
+        p, r = x[i], x[i + 1] - x[i]
+        for j in range(i + 2, n):
+            q, s = x[j], x[j + 1] - x[j]
+            den = r[0] * s[1] - r[1] * s[0]
+            if abs(den) < 1e-14:
+                continue
+            u = ((q - p)[0] * s[1] - (q - p)[1] * s[0]) / den
+            v = ((q - p)[0] * r[1] - (q - p)[1] * r[0]) / den
+            if 0 <= u <= 1 and 0 <= v <= 1:
+                return True
+    return False

@@ -60,14 +60,26 @@ def test_bad_terms_and_optimizer_inputs():
         ds.optimize((), ds.Parametrization(free=("gap",)), n=16)
 
 
-def test_snap_speed_refused_until_dynamics_exist():
-    if ds.dynamics_available():
-        pytest.skip("dynamics API present")
+def test_snap_speed_term_with_and_without_dynamics(monkeypatch):
+    """`SnapSpeed` and the two snap-speed studies need `jaxrod.snap_speed`. It exists: the
+    term is built (default tol 1 % of the target; unknown `jaxrod.snap_speed` options are
+    refused, naming them). Without it (hidden here) the term and both studies refuse with
+    NotImplementedError before computing anything. (`actuator_study` is not among them: it
+    runs `jaxrod.simulate`, not `snap_speed`. This test used to expect its refusal too and
+    was skipped whenever the dynamics existed, i.e. always.)"""
+    assert ds.dynamics_available() and callable(jr.snap_speed)
+    t = ds.SnapSpeed(20.0)
+    assert (t.target, t.tol, t.weight, t.direction) == (20.0, 0.2, 1.0, "up")
+    assert ds.SnapSpeed(-15.0, direction="down", nudge=0.05).describe()["options"] == {"nudge": 0.05}
+    with pytest.raises(ValueError, match="options"):
+        ds.SnapSpeed(20.0, wobble=1.0)
+    monkeypatch.delattr(jr, "snap_speed")
+    assert not ds.dynamics_available()
     with pytest.raises(NotImplementedError, match="dynamics"):
         ds.SnapSpeed(20.0)
-    for study in (ds.fastest_snap_study, ds.snap_speed_study, ds.actuator_study):
+    for study in (ds.fastest_snap_study, ds.snap_speed_study):
         with pytest.raises(NotImplementedError, match="dynamics"):
-            study()
+            study(progress=False)
 
 
 # --- fold-height design (fast) ---------------------------------------------------------

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import jaxrod as jr
-from helpers import residual, solve, state
+from helpers import crosses, residual, solve, state
 
 
 GTOL = 1e-9  # the solver's float64 default: the independent residual must meet it too
@@ -36,8 +36,9 @@ def check_state(eq, kind=None):
     assert np.max(np.abs(r[-1] - [float(eq.scene.clamps.gap), 0.0])) <= GTOL
     dense = np.linalg.eigvalsh(np.asarray(jr.dense_reduced_hessian(eq)))
     assert dense[0] > 0 and int(eq.num_unstable) == 0
-    # no loops: valid states here turn by at most ~145 deg anywhere
+    # no loops: valid states here turn by at most ~145 deg anywhere, and do not cross themselves
     assert np.max(np.abs(theta)) < 1.5 * math.pi
+    assert not crosses(theta, np.asarray(jr.discretize(eq.scene).h))
     h = float(jr.fold_height(eq))
     if kind is not None:
         assert (h > 0) if kind == "up" else (h < 0)
@@ -58,6 +59,10 @@ def test_initial_state_extremes(extreme_states, case):
     eq = extreme_states[case]
     if eq.result == jr.RESULTS.successful:
         check_state(eq, case[3])
+    elif eq.result == jr.RESULTS.self_intersecting:
+        # a converged state through itself (tiny gap, tilted clamps): flagged, as an
+        # independent crossing test confirms
+        assert crosses(eq.theta, np.asarray(jr.discretize(eq.scene).h))
     else:
         assert eq.result == jr.RESULTS.state_not_found, jr.RESULTS[eq.result]
 

@@ -41,6 +41,12 @@ import jaxrod as jr
 from helpers import loglog_slope
 
 
+def _converged(eq):
+    """The Newton solve converged: `successful`, or `self_intersecting` (a converged state
+    through itself, at the smallest gaps; its stability is still the model's question)."""
+    return (eq.result == jr.RESULTS.successful) | (eq.result == jr.RESULTS.self_intersecting)
+
+
 @pytest.fixture(scope="module")
 def snap():
     cache = {}
@@ -54,10 +60,66 @@ def snap():
     return f
 
 
-def _valid(path):
-    """A snap has a finite angle and a kind; no snap has NaN and kind none."""
-    a, k = float(path.alpha_c), int(path.kind)
-    return (bool(path.snaps) and np.isfinite(a) and k in (1, 2)) or (not bool(path.snaps) and np.isnan(a) and k == 0)
+def _crossing(theta, scene):
+    """Whether two segments of the state `theta` that are not neighbours properly cross
+    (orientation test on the node positions; NumPy, independent of `jaxrod.clearance`)."""
+    h = np.asarray(jr.discretize(scene).h)
+    th = np.asarray(theta)
+    x = np.concatenate([[[0.0, 0.0]], np.cumsum(h[:, None] * np.stack([np.cos(th), np.sin(th)], 1), 0)])
+    a, b = x[:-1], x[1:]
+    i, j = np.triu_indices(len(th), k=2)
+
+    def orient(p, q, r):
+        return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1])
+                       - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
+
+    return bool(np.any((orient(a[i], b[i], a[j]) * orient(a[i], b[i], b[j]) < 0)
+                       & (orient(a[j], b[j], a[i]) * orient(a[j], b[j], b[i]) < 0)))
+
+
+def _problems(path, sign, scene):
+    """What is wrong with one path's answer (an empty list: nothing). An answer is either
+    trustworthy or flagged. Flagged: `result` or `start_result` is not `successful` (the
+    path's own start state is missing, the landing failed, the continuation stopped short,
+    a state passes through itself, ...), whatever the values. Trustworthy (both codes
+    successful), then never NaN/inf: a snap has a finite alpha_c of the path's sign
+    (`sign` +1 up, -1 down) with |alpha_c| <= pi, a kind (1 fold, 2 branch point), finite
+    critical and landing states (angles and fold heights), a jump between them, and neither
+    state crosses itself; no snap has alpha_c NaN, kind 0, and a continuation whose every
+    point is stable and that reached the bound |alpha| = pi."""
+    if not (bool(path.result == jr.RESULTS.successful) and bool(path.start_result == jr.RESULTS.successful)):
+        return []  # flagged by its code
+    a, k, out = float(path.alpha_c), int(path.kind), []
+    if bool(path.snaps):
+        if not (np.isfinite(a) and sign * a > 0 and abs(a) <= np.pi):
+            out.append(f"alpha_c {a!r} with success")
+        if k not in (1, 2):
+            out.append(f"kind {k} of a snap")
+        before, after = float(path.fold_height_before), float(path.fold_height_after)
+        if not (np.isfinite(before) and np.isfinite(after)):
+            out.append(f"fold heights {before!r} -> {after!r} with success")
+        elif before == after:
+            out.append("a snap without a jump")
+        for nm in ("theta_before", "force_before", "theta_after", "force_after"):
+            if not np.all(np.isfinite(np.asarray(getattr(path, nm)))):
+                out.append(f"non-finite {nm} with success")
+        for nm in ("theta_before", "theta_after"):
+            if np.all(np.isfinite(np.asarray(getattr(path, nm)))) and _crossing(getattr(path, nm), scene):
+                out.append(f"{nm} crosses itself with success")
+    else:
+        if not (np.isnan(a) and k == 0):
+            out.append(f"no snap but alpha_c {a!r}, kind {k}")
+        br = path.branch
+        cnt = np.asarray(br.count)
+        lam = [np.asarray(br.lam)[s, :c] for s, c in enumerate(cnt) if c > 0]
+        unst = [np.asarray(br.num_unstable)[s, :c] for s, c in enumerate(cnt) if c > 0]
+        if not lam or not all(np.all(np.isfinite(v)) for v in lam):
+            out.append("no snap: the continuation holds no (finite) points")
+        elif max(np.max(np.abs(v)) for v in lam) < np.pi - 1e-9:
+            out.append("no snap with success, but the continuation stopped before |alpha| = pi")
+        if any(np.any(u > 0) for u in unst):
+            out.append("no snap with success, but an unstable point on the walked path")
+    return out
 
 
 @pytest.mark.parametrize("gap", [0.3, 0.5, 0.7])
@@ -124,7 +186,7 @@ def _dense_min_eig(sc, theta, force, lam, lam_mid):
     mid = jr.solve_equilibrium(_at(sc, lam_mid), theta, force, solver=jr.Newton(minimize=False))
     e0 = jnp.linalg.eigvalsh(jr.dense_reduced_hessian(eq))[0]
     e1 = jnp.linalg.eigvalsh(jr.dense_reduced_hessian(mid))[0]
-    return e0, e1, mid.result == jr.RESULTS.successful
+    return e0, e1, _converged(mid)
 
 
 def _check_no_missed_instability(r, sc):
@@ -173,7 +235,7 @@ def _dense_hessians(psi0, gap, theta, force, lam, lam_mid):
         eq = jr.Equilibrium(t, m, jr.RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32),
                             _at(sc, a))
         mid = jr.solve_equilibrium(_at(sc, a_mid), t, m, solver=jr.Newton(minimize=False))
-        return jr.hessian(eq).dense(), jr.hessian(mid).dense(), mid.result == jr.RESULTS.successful
+        return jr.hessian(eq).dense(), jr.hessian(mid).dense(), _converged(mid)
 
     return jax.vmap(one)(psi0, gap, theta, force, lam, lam_mid)
 
@@ -314,24 +376,70 @@ def test_no_missed_instability_on_the_phase_diagram_grid(snap):
 @pytest.mark.parametrize("psi0, gap, s0", [(60.0, 0.05, 0.02), (60.0, 0.95, 0.02), (10.0, 0.5, 0.02),
                                            (60.0, 0.5, 0.004), (180.0, 0.05, 0.02)])
 def test_extremes_give_result_or_code(snap, psi0, gap, s0):
+    """At extreme parameters each path's answer is trustworthy (successful codes, finite and
+    consistent values, checked by `_problems`) or flagged by a non-successful code."""
     r = snap(psi0, gap, s0=s0)
-    for path in (r.up, r.down):
-        assert _valid(path), (psi0, gap, s0, float(path.alpha_c), int(path.kind))
-        if bool(path.snaps):
-            assert np.isfinite(float(path.fold_height_before)) and np.isfinite(float(path.fold_height_after))
+    scene = jr.make_scene(psi0, gap, 0.0, s0=s0)
+    for name, sign, path in (("up", 1.0, r.up), ("down", -1.0, r.down)):
+        why = _problems(path, sign, scene)
+        assert not why, (psi0, gap, s0, name, why, jr.RESULTS[path.result], jr.RESULTS[path.start_result])
+
+
+def test_extremes_check_is_not_vacuous(snap):
+    """`_problems` accepts clean answers and rejects doctored ones: NaN/inf with success, a
+    wrong sign, a self-crossing landing state, a no-snap path that never reached the bound,
+    while the same doctored values pass once flagged by a code."""
+    scene = jr.make_scene(10.0, 0.5, 0.0)
+    up = snap(10.0, 0.5).up  # an ordinary snap up (kind branch point), both codes successful
+    assert bool(up.snaps) and up.result == jr.RESULTS.successful and up.start_result == jr.RESULTS.successful
+    assert _problems(up, 1.0, scene) == []
+    assert _problems(up, -1.0, scene)  # alpha_c of the wrong sign
+    nan = jnp.asarray(jnp.nan)
+    for bad in (eqx.tree_at(lambda p: p.alpha_c, up, nan), eqx.tree_at(lambda p: p.fold_height_after, up, nan),
+                eqx.tree_at(lambda p: p.theta_after, up, up.theta_after.at[3].set(jnp.inf)),
+                eqx.tree_at(lambda p: p.kind, up, jnp.asarray(0, jnp.int32))):
+        assert _problems(bad, 1.0, scene)
+        flagged = eqx.tree_at(lambda p: p.result, bad, jr.RESULTS.landing_failed)
+        assert _problems(flagged, 1.0, scene) == []
+    n = scene.mesh.n  # a landing state that loops through itself: a full turn in the middle
+    loop = up.theta_after.at[n // 2 - 10:n // 2 + 10].add(jnp.linspace(0.0, 2.2 * jnp.pi, 20))
+    assert _crossing(loop, scene) and not _crossing(up.theta_after, scene)
+    assert any("crosses" in w for w in _problems(eqx.tree_at(lambda p: p.theta_after, up, loop), 1.0, scene))
+    # no snap down at Psi0 = 30 deg, G/L = 0.8 (the paper), from an up state that exists
+    none = snap(30.0, 0.8).down
+    assert not bool(none.snaps) and none.start_result == jr.RESULTS.successful
+    assert none.result == jr.RESULTS.successful and _problems(none, -1.0, scene) == []
+    short = eqx.tree_at(lambda p: p.branch.lam, none, 0.5 * none.branch.lam)  # stopped at |alpha| < pi
+    assert any("stopped before" in w for w in _problems(short, -1.0, scene))
+    assert _problems(eqx.tree_at(lambda p: p.start_result, short, jr.RESULTS.state_not_found), -1.0, scene) == []
 
 
 def test_alpha_beyond_90(snap):
-    """Clamp angles beyond +-90 deg: the stable states there are converged equilibria or a
-    clear code, never a silent wrong answer."""
+    """Clamp angles beyond +-90 deg (Psi0 = 60 deg, G/L = 0.5): the stable states there are
+    converged equilibria or the clear code `state_not_found`, never a silent wrong answer.
+    Which exist follows from the hysteresis loop: the down state is lost at alpha_c_up
+    (77.4 deg) and the up state at alpha_c_down (-82.9 deg), so at +120 deg only the up
+    state is stable and at -120 deg only the down state; the tilted clamps hold the state on
+    the side they point to."""
+    from helpers import residual
+
+    r = snap(60.0, 0.5)
+    assert np.degrees(float(r.up.alpha_c)) < 120.0 and np.degrees(float(r.down.alpha_c)) > -120.0
     for a in (120.0, -120.0):
         for state in ("up", "down"):
             eq = jr.initial_state(jr.make_scene(60.0, 0.5, a), state)
-            if eq.result == jr.RESULTS.successful:
-                h = float(jr.fold_height(eq))
-                assert bool(eq.stable) and np.isfinite(h) and (h > 0) == (state == "up")
-            else:
-                assert eq.result == jr.RESULTS.state_not_found or jr.RESULTS[eq.result]
+            exists = (state == "up") == (a > 0)
+            if not exists:
+                assert eq.result == jr.RESULTS.state_not_found, (a, state, jr.RESULTS[eq.result])
+                continue
+            assert eq.result == jr.RESULTS.successful, (a, state, jr.RESULTS[eq.result])
+            # verified independently of the solver: stationary, stable (dense eigenvalues),
+            # on the requested side
+            rt, rm = residual(eq)
+            assert rt <= 1e-9 and rm <= 1e-9, (a, state, rt, rm)
+            assert np.linalg.eigvalsh(np.asarray(jr.dense_reduced_hessian(eq)))[0] > 0 and bool(eq.stable)
+            h = float(jr.fold_height(eq))
+            assert np.isfinite(h) and (h > 0) == (state == "up"), (a, state, h)
 
 
 @pytest.mark.slow

@@ -27,11 +27,47 @@ def test_bad_input_names_parameter(kw, name):
 
 
 def test_flat_strip_never_stops():
+    """Psi0 = 180 deg: `termination_gap` answers without a scan that both paths snap up to
+    G = L (G* = 1, reason "flat_strip_never_stops", kind "branch_point"; no bracket, no
+    alpha_c at G*). Checked here at large gaps by direct `snap_angles` calls (N = 40): both
+    paths snap, at a branch point, into the other state with a jump larger than twice the
+    critical fold height (the snap does not fade as G -> L); symmetric, alpha_c_down =
+    -alpha_c_up, because the mirror y -> -y (theta -> -theta, alpha -> -alpha) maps the
+    flat strip's snap-up path onto its snap-down path; and alpha_c / sqrt(1 - G/L) -> 2 rad,
+    the shallow-arch limit of the linear theory (derived in tests/test_snap_physics.py),
+    approached from above with a deviation O(1 - G/L)."""
+    from jaxrod._snap import KIND_NAMES
+
     r = jr.termination_gap(180.0)
     assert r.gap_up == 1.0 and r.gap_down == 1.0
     assert r.reason_up == r.reason_down == "flat_strip_never_stops"
+    assert r.gap_criterion_up == r.gap_criterion_down == 1.0 and r.evaluations == 0
+    assert all(math.isnan(x) for x in (*r.bracket_up, *r.bracket_down, r.alpha_c_up, r.alpha_c_down))
     d = r.to_dict()
-    assert d["bracket_up"] == [None, None] and json.dumps(d)
+    assert d["bracket_up"] == [None, None] and json.loads(json.dumps(d))["gap_down"] == 1.0
+
+    f = jax.jit(jr.snap_angles)
+    ratios = []
+    gaps = (0.8, 0.9, 0.95)
+    for gap in gaps:
+        s = f(jr.make_scene(180.0, gap, 0.0, n=40))
+        for name, path in (("up", s.up), ("down", s.down)):
+            assert path.result == jr.RESULTS.successful and path.start_result == jr.RESULTS.successful, (gap, name)
+            assert bool(path.snaps), (gap, name)
+            assert KIND_NAMES[int(path.kind)] == getattr(r, f"kind_{name}") == "branch_point", (gap, name)
+            before, after = float(path.fold_height_before), float(path.fold_height_after)
+            assert before * after < 0 and abs(after - before) > 2.0 * abs(before), (gap, name, before, after)
+        up, down = float(s.up.alpha_c), float(s.down.alpha_c)
+        assert up > 0 and abs(up + down) < 1e-9 * up, (gap, up, down)
+        ratios.append(up / math.sqrt(1.0 - gap))
+    # measured 2.0259, 2.0065, 1.9969: the deviation is linear in 1 - G/L (its steps halve
+    # with 1 - G/L: 0.2 -> 0.1 -> 0.05) and its linear extrapolation to G = L is 2 up to the
+    # N = 40 discretization (alpha_c ~1 % low there: ~1000 deg / N^2 in
+    # benchmarks/results/convergence_alpha_c.md; the extrapolation gives 1.987)
+    assert all(abs(q - 2.0) < 0.03 for q in ratios), ratios
+    steps = -np.diff(ratios)
+    assert np.all(steps > 0) and 1.5 < steps[0] / steps[1] < 2.6, ratios
+    assert abs(ratios[-1] - steps[-1] - 2.0) < 0.025, ratios
 
 
 @pytest.mark.parametrize("argv", [

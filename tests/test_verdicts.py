@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import jaxrod as jr
+from helpers import crosses
 from jaxrod._snap import KIND_FOLD, _polish
 from jaxrod._continuation import SymmetricAlpha
 
@@ -75,25 +76,6 @@ def test_substituted_start_is_named():
     assert r2.up.start_result == OK and r2.down.start_result == OK
 
 
-def _crosses_numpy(theta, h):
-    """Independent crossing test: do two segments |i - j| >= 2 intersect properly?"""
-    t = np.asarray(theta)
-    x = np.concatenate([[[0.0, 0.0]], np.cumsum(h[:, None] * np.stack([np.cos(t), np.sin(t)], 1), 0)])
-    n = len(t)
-    for i in range(n):
-        for j in range(i + 2, n):
-            p, r = x[i], x[i + 1] - x[i]
-            q, s = x[j], x[j + 1] - x[j]
-            den = r[0] * s[1] - r[1] * s[0]
-            if abs(den) < 1e-14:
-                continue
-            u = ((q - p)[0] * s[1] - (q - p)[1] * s[0]) / den
-            v = ((q - p)[0] * r[1] - (q - p)[1] * r[0]) / den
-            if 0 <= u <= 1 and 0 <= v <= 1:
-                return True
-    return False
-
-
 def test_states_through_themselves_are_flagged():
     """At G/L = 0.1 the critical states of both paths pass through themselves (checked
     here by an independent crossing test); their paths carry `self_intersecting`, and a
@@ -101,11 +83,11 @@ def test_states_through_themselves_are_flagged():
     r = _snap(30, 0.1)
     h = np.full(N, 1.0 / N)
     for p in (r.up, r.down):
-        assert _crosses_numpy(p.theta_before, h)
+        assert crosses(p.theta_before, h)
         assert p.result == jr.RESULTS.self_intersecting
     r2 = _snap(60, 0.5)
     for p in (r2.up, r2.down):
-        assert not _crosses_numpy(p.theta_before, h) and p.result == OK
+        assert not crosses(p.theta_before, h) and p.result == OK
         assert float(jr.clearance(p.theta_before, jr.make_scene(n=N))) > 0
 
 
