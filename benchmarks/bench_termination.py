@@ -127,7 +127,8 @@ def main():
               "time); 'bisection' where neither applies. Their derivatives in Psi0 are implicit "
               "(tests/test_termination.py checks them against central differences). 'snap criterion': the "
               "bisection midpoint (bracket 1e-5) of `snap_angles`' own yes/no answer, which the phase diagram "
-              "uses: it stops ~1e-3 below a cusp, where the jump falls below the snap criterion's distance, and "
+              "uses: every loss of stability at a fold is a snap, so it stops 8e-5 to 7e-4 below a cusp, where "
+              "the S the branch makes is shorter than a continuation step, and "
               "agrees with G_f to the bracket where the start state is lost."]
     lines += ["", "Side by side at Psi0 = 60 deg, G/L = 0.5 (steady, median of 5):", "",
               "| snap_angles (s) | extended-system refinement, both paths (s) | ratio |", "|---|---|---|",

@@ -19,10 +19,10 @@ stability". Each path (snap up, snap down) is located in two stages:
 
 At a cusp the two nearly agree: `snap_angles` counts every loss of stability at a fold as
 a snap however small its jump (MODEL.md), so its criterion holds until the fold pair, and
-with it every loss of stability on the path, ends at the cusp, except within ~6e-4 in G/L
-of it, where the S the branch makes there is shorter than a continuation step at the
-default `Continuation()` (measured at 60 deg, n = 100: the criterion's gap 0.7619-0.7621,
-the cusp 0.762395; `ds_max=0.05` resolves it to 3e-4). `gap_*` is the cusp itself. Only at a branch point
+with it every loss of stability on the path, ends at the cusp, except within 8e-5 to 7e-4
+in G/L of it, where the S the branch makes there is shorter than a continuation step at
+the default `Continuation()` (measured at n = 100, benchmarks/results/termination.md: at
+60 deg the criterion's gap 0.76206, the cusp 0.762395; `ds_max=0.05` resolves it closer). `gap_*` is the cusp itself. Only at a branch point
 does a small jump (a landing less than `jaxrod._snap.JUMP_DISTANCE` away, $L^2$ norm of
 the angle field) mean "no snap yet": the strip follows the new stable branch (supercritical).
 The reported `jump_*` (the fold height change at $G^\ast_-$) says how large the snap still

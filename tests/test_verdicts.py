@@ -53,9 +53,9 @@ def test_fold_with_a_small_jump_is_a_snap(cusp_60):
 
 def test_snapping_ends_at_the_cusp(cusp_60):
     """The down path snaps below the cusp and not above it. At the default step the fold
-    pair is resolved up to ~6e-4 in G/L below the cusp (closer, the S the branch makes is
-    shorter than a continuation step: at cusp - 3e-4 the default step passes it, ds_max =
-    0.05 resolves it); `termination_gap` reports the cusp itself."""
+    pair is resolved up to 3.4e-4 in G/L below the cusp here (closer, the S the branch
+    makes is shorter than a continuation step; ds_max = 0.05 resolves cusp - 3e-4);
+    `termination_gap` reports the cusp itself."""
     below = _snap(60, cusp_60 - 8e-4).down
     above = _snap(60, cusp_60 + 3e-4).down
     assert bool(below.snaps) and below.result == OK and int(below.kind) == KIND_FOLD
