@@ -255,9 +255,11 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {solver!r}")
     dtype = jnp.result_type(theta0)
-    if dtype != jnp.float64:
-        raise ValueError("simulate needs float64 (jax.config.update('jax_enable_x64', True)): "
-                         "float32 cannot resolve the fold speed peak and energy balance")
+    from ._energy.geometry import scene_dtype
+
+    if dtype != jnp.float64 or scene_dtype(scene) != jnp.float64:
+        raise ValueError("simulate needs float64 angles and scene (jax.config.update('jax_enable_x64', True) "
+                         "before building them): float32 cannot resolve the fold speed peak and energy balance")
     theta0 = jnp.asarray(theta0)
     omega0 = jnp.zeros_like(theta0) if omega0 is None else jnp.asarray(omega0, dtype)
     y0 = (jnp.stack([theta0, omega0]), jnp.zeros((), dtype))
