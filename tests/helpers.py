@@ -156,22 +156,32 @@ def alpha_c_benchmark(psi0_deg, gap, n=None):
     return out[0], out[1], data["50"][key][2], data["50"][key][3]
 
 
-def crosses(theta, h):
-    """Independent self-crossing test in numpy: do two segments |i - j| >= 2 of the chain
-    with angles `theta` and lengths `h` (node 0 at the origin) intersect?"""
-    t = np.asarray(theta, float)
-    h = np.asarray(h, float)
-    x = np.concatenate([[[0.0, 0.0]], np.cumsum(h[:, None] * np.stack([np.cos(t), np.sin(t)], 1), 0)])
-    n = len(t)
+
+def np_crossings(x, tol=1e-12):
+    """Pairs (i, j), j >= i + 2, of segments [x_i, x_i+1], [x_j, x_j+1] that meet, by
+    solving p + t r = q + u s for (t, u) (non-parallel segments only): an independent
+    numpy check of `jaxrod._contact`."""
+    n = len(x) - 1
+    out = []
     for i in range(n):
         p, r = x[i], x[i + 1] - x[i]
         for j in range(i + 2, n):
             q, s = x[j], x[j + 1] - x[j]
             den = r[0] * s[1] - r[1] * s[0]
-            if abs(den) < 1e-14:
+            if abs(den) < 1e-300:
                 continue
-            u = ((q - p)[0] * s[1] - (q - p)[1] * s[0]) / den
-            v = ((q - p)[0] * r[1] - (q - p)[1] * r[0]) / den
-            if 0 <= u <= 1 and 0 <= v <= 1:
-                return True
-    return False
+            w = q - p
+            t = (w[0] * s[1] - w[1] * s[0]) / den
+            u = (w[0] * r[1] - w[1] * r[0]) / den
+            if -tol <= t <= 1 + tol and -tol <= u <= 1 + tol:
+                out.append((i, j))
+    return out
+
+
+def crosses(theta, h):
+    """Does the chain with angles `theta` and lengths `h` (node 0 at the origin) pass
+    through itself (`np_crossings` non-empty)?"""
+    t = np.asarray(theta, float)
+    h = np.asarray(h, float)
+    x = np.concatenate([[[0.0, 0.0]], np.cumsum(h[:, None] * np.stack([np.cos(t), np.sin(t)], 1), 0)])
+    return bool(np_crossings(x))

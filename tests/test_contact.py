@@ -10,7 +10,7 @@ import pytest
 
 import jaxrod as jr
 from jaxrod import _contact
-from helpers import central_difference
+from helpers import central_difference, np_crossings
 
 
 segment_distances = jax.jit(_contact.segment_distances)
@@ -32,26 +32,6 @@ def chain(a, b, c, d):
 def np_nodes(theta, h):
     e = h[:, None] * np.stack([np.cos(theta), np.sin(theta)], -1)
     return np.vstack([np.zeros((1, 2)), np.cumsum(e, 0)])
-
-
-def np_crossings(x, tol=1e-12):
-    """Pairs (i, j), j >= i + 2, of segments [x_i, x_i+1], [x_j, x_j+1] that meet, by
-    solving p + t r = q + u s for (t, u) (non-parallel segments only)."""
-    n = len(x) - 1
-    out = []
-    for i in range(n):
-        p, r = x[i], x[i + 1] - x[i]
-        for j in range(i + 2, n):
-            q, s = x[j], x[j + 1] - x[j]
-            den = r[0] * s[1] - r[1] * s[0]
-            if abs(den) < 1e-300:
-                continue
-            w = q - p
-            t = (w[0] * s[1] - w[1] * s[0]) / den
-            u = (w[0] * r[1] - w[1] * r[0]) / den
-            if -tol <= t <= 1 + tol and -tol <= u <= 1 + tol:
-                out.append((i, j))
-    return out
 
 
 def np_grid_distance(a, b, c, d, m=301):
