@@ -62,8 +62,8 @@ class SnapPath(eqx.Module):
     `fold_height_before`, `theta_after`/`fold_height_after` the state it lands in,
     `branch` the continuation stages (leading axis: stage; a supercritical branch point
     is followed by a second stage on the asymmetric branch, a snap by one on the landed
-    branch unless `continue_after_snap=False`), `result` (a RESULTS code for the start
-    state), `refine_result` (the RESULTS code of the extended-system refinement of the
+    branch unless `continue_after_snap=False`), `result` and `start_result` (below),
+    `stop` (the deciding `Branch.stop`), `refine_result` (the RESULTS code of the extended-system refinement of the
     critical point, `jaxrod.critical_point`; where it fails the bisection values are kept),
     `mode` the critical mode (angle part, unit $L^2$ norm), `jump` the $L^2$ distance of the
     landed angle field from the critical one (rad; NaN if it does not snap).
