@@ -27,7 +27,7 @@ def _check_ringing(n, t1, bound, psi0=30.0):
     tr = jr.simulate(st.scene, st.theta0, st.protocol, t1=t1, stop_at_snap=False, n_frames=8)
     assert tr.result == jr.RESULTS.successful, jr.RESULTS[tr.result]
     assert float(tr.t_end) == pytest.approx(t1)
-    assert bool(tr.snapped) and float(tr.t_cross) < 0.7
+    assert bool(tr.snapped) and float(tr.t_cross) < t1 - 5.0  # at least 5 T of ringing after the snap
     err = _energy_error(tr)
     assert err.size == tr.t.size  # every sample finite
     assert err.max() < bound, err.max()
@@ -54,7 +54,8 @@ def test_ringing_fine_meshes(n):
 
 @pytest.mark.slow
 def test_ringing_flat_strip():
-    _check_ringing(50, 5.6, 1e-2, psi0=180.0)
+    """The flat strip's brink snap (a branch point) crosses later, at ~0.89 T: 6 T in all."""
+    _check_ringing(50, 6.0, 1e-2, psi0=180.0)
 
 
 def test_too_large_a_step_is_flagged():
