@@ -18,8 +18,8 @@ Values (angles in degrees, lengths in $L$, energies in $B/L$):
   not implemented: it is refused as an optimization term.
 * `Snaps(direction, snaps)`: a constraint (snap or no snap on that path), no residual;
   an iterate that violates it counts as infeasible (infinite objective) and is rejected.
-* `SnapSpeed`: the snapping speed $v_s/v^*$ needs the dynamics API (issue 4); until
-  `jaxrod` provides it, constructing the term raises `NotImplementedError`.
+* `SnapSpeed`: the snapping speed $v_s/v^*$ (`jaxrod.snap_speed`); where that function is
+  not available, constructing the term raises `NotImplementedError`.
 """
 
 from __future__ import annotations

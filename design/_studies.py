@@ -1,4 +1,4 @@
-r"""Design studies (issue 5), each a function returning a result with an independent check.
+r"""Design studies, each a function returning a result with an independent check.
 
 (a) `snap_angle_study`: $(\Psi_0, G/L)$ such that $\alpha_{c,\rm up}$ and $\alpha_{c,\rm down}$ hit
     targets (default 60 and -70 deg), $s_0 = 0.02$. Multi-start Levenberg-Marquardt on a coarse
@@ -91,7 +91,7 @@ def snap_angle_study(alpha_up_deg=60.0, alpha_down_deg=-70.0, *, bounds=None, s0
 def _needs_dynamics(what):
     if not dynamics_available():
         raise NotImplementedError(f"{what} needs a differentiable snap speed from jaxrod's dynamics "
-                                  "(issue 4); not available yet in design")
+                                  "(jaxrod.snap_speed), which this jaxrod does not provide")
 
 
 @dataclasses.dataclass
