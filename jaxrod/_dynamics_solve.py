@@ -184,17 +184,17 @@ def _default_n_fine(scene, solver, dt, t1, courant, substeps=1):
     return int(min(max(math.ceil(t1 / (substeps * _rattle_dt_natural(scene, courant))) + 1, 2048), 2**19))
 
 
-def _verdict(sol, event_on, finite):
-    """jaxrod's code for a diffrax solution (see `Trajectory.result`)."""
+def _verdict(sol, finite):
+    """jaxrod's code for a diffrax solution whose event is (snap done, energy bad, end bad)
+    (see `Trajectory.result`)."""
     sr = sol.result
     res = RESULTS.where(sr == dfx.RESULTS.successful, RESULTS.successful, RESULTS.integration_failed)
     res = RESULTS.where(sr == dfx.RESULTS.max_steps_reached, RESULTS.steps_exhausted, res)
     res = RESULTS.where(sr == dfx.RESULTS.nonlinear_divergence, RESULTS.constraint_solve_failed, res)
-    if event_on:
-        _, energy_bad, constraint_bad = sol.event_mask
-        on_event = RESULTS.where(energy_bad, RESULTS.energy_drift,
-                                 RESULTS.where(constraint_bad, RESULTS.constraint_drift, RESULTS.successful))
-        res = RESULTS.where(sr == dfx.RESULTS.event_occurred, on_event, res)
+    _, energy_bad, constraint_bad = sol.event_mask
+    on_event = RESULTS.where(energy_bad, RESULTS.energy_drift,
+                             RESULTS.where(constraint_bad, RESULTS.constraint_drift, RESULTS.successful))
+    res = RESULTS.where(sr == dfx.RESULTS.event_occurred, on_event, res)
     return RESULTS.where((res == RESULTS.successful) & ~finite, RESULTS.nonfinite, res)
 
 
@@ -298,24 +298,23 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     st = scene.strip
 
     def balance(t, y):
-        """E_k + V - W and the end-position error of a state y = ((theta, omega), W)."""
+        """E_k + V - W of a state y = ((theta, omega), W)."""
         q, w = y
         aL, aR, _, _ = protocol.angles(t)
         dd = d._replace(theta_left=jnp.asarray(aL, dtype), theta_right=-jnp.asarray(aR, dtype))
         th, om = q[0], q[1]
-        e = kinetic_energy(th, om, dd) + potential_energy(th, scene_at(scene, aL, aR), dd) - w
-        end = jnp.stack([jnp.sum(d.h * jnp.cos(th)) - scene.clamps.gap, jnp.sum(d.h * jnp.sin(th))])
-        return e, jnp.sqrt(jnp.sum(end**2))
+        return kinetic_energy(th, om, dd) + potential_energy(th, scene_at(scene, aL, aR), dd) - w
 
-    e0, _ = balance(0.0, y0)
+    e0 = balance(0.0, y0)
     e_scale = jnp.maximum(jnp.abs(e0), st.bending_stiffness / st.length)
 
     def energy_bad(t, y, a, **kw):
-        e, _ = balance(t, y)
-        return conservative & ~(jnp.abs(e - e0) <= energy_tol * e_scale)
+        return conservative & ~(jnp.abs(balance(t, y) - e0) <= energy_tol * e_scale)
 
     def constraint_bad(t, y, a, **kw):
-        _, c = balance(t, y)
+        th = y[0][0]
+        end = jnp.stack([jnp.sum(d.h * jnp.cos(th)) - scene.clamps.gap, jnp.sum(d.h * jnp.sin(th))])
+        c = jnp.sqrt(jnp.sum(end**2))
         finite = jnp.all(jnp.isfinite(y[0])) & jnp.isfinite(y[1])
         return ~(c <= constraint_tol * st.length) | ~finite
 
@@ -373,6 +372,6 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
         theta=fr["theta"], positions=fr["positions"], speed=fr["speed"], v_s=v_s, t_peak=t_peak,
         t_cross=t_cross, t_end=t_end, snapped=snapped, kinetic_peak=jnp.max(kin), energy_drift=drift,
         num_steps=sol.stats["num_steps"] * substeps,  # RATTLE steps (substeps: 1 otherwise)
-        result=_verdict(sol, True, jnp.all(jnp.where(jnp.isfinite(sol.ts[0]), jnp.isfinite(E), True))),
+        result=_verdict(sol, jnp.all(jnp.where(jnp.isfinite(sol.ts[0]), jnp.isfinite(E), True))),
         solver_result=sol.result,
     )
