@@ -43,9 +43,9 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-import design as ds  # noqa: E402
+import jaxrod.design as ds  # noqa: E402
 import jaxrod as jr  # noqa: E402
-from design._optimize import _linearize_batch  # noqa: E402
+from jaxrod.design._optimize import _linearize_batch  # noqa: E402
 
 
 def timed(fn, repeats=5):

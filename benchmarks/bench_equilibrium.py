@@ -398,8 +398,8 @@ def run_extra(n, *, log=print):
 
 def profile_pieces(n, *, log=print):
     """Time the building blocks of one structured Newton iteration (private API)."""
-    from jaxrod import _kkt
-    from jaxrod._energy.geometry import discretize
+    from jaxrod.linalg import kkt
+    from jaxrod.energy.geometry import discretize
 
     scene0 = target_scene(n)
     scene1 = with_alpha(scene0, ALPHA_STEP_DEG)
@@ -417,23 +417,23 @@ def profile_pieces(n, *, log=print):
 
     @jax.jit
     def assemble(scene, t, m):
-        return _kkt.assemble(gfn(scene), t, m)
+        return kkt.assemble(gfn(scene), t, m)
 
     @jax.jit
     def kkt_solve(K, g):
-        return _kkt.solve(K, -g[0], -g[1])
+        return kkt.solve(K, -g[0], -g[1])
 
     @jax.jit
     def count1(K):
-        return _kkt.count_below(K, jnp.zeros(1, jnp.float64))
+        return kkt.count_below(K, jnp.zeros(1, jnp.float64))
 
     @jax.jit
     def count14(K):
-        return _kkt.count_below(K, jnp.linspace(-1.0, 0.0, 14))
+        return kkt.count_below(K, jnp.linspace(-1.0, 0.0, 14))
 
     @jax.jit
     def sturm1_scan_only(K):
-        return _kkt._pivot_negatives(K, jnp.zeros(1, jnp.float64))
+        return kkt._pivot_negatives(K, jnp.zeros(1, jnp.float64))
 
     @jax.jit
     def tri3(K, g):
@@ -443,8 +443,8 @@ def profile_pieces(n, *, log=print):
     @jax.jit
     def one_plain_iteration(scene, t, m):
         g = gfn(scene)(t, m)
-        K = _kkt.assemble(gfn(scene), t, m)
-        return _kkt.solve(K, -g[0], -g[1])
+        K = kkt.assemble(gfn(scene), t, m)
+        return kkt.solve(K, -g[0], -g[1])
 
     @jax.jit
     def naive_hessian(scene, t, m):
@@ -628,7 +628,7 @@ def markdown(report):
     for t in report["targets"]:
         lines.append(f"- **{'PASS' if t['pass'] else 'FAIL'}** {t['name']}: {t['detail']}")
     if report.get("profile"):
-        lines += ["", "Profile of the pieces (median ms; private `jaxrod._kkt` API):", ""]
+        lines += ["", "Profile of the pieces (median ms; private `jaxrod.linalg.kkt` API):", ""]
         keys = list(report["profile"][0]["median_ms"])
         lines.append("| N | " + " | ".join(k.replace("_", " ") for k in keys) + " |")
         lines.append("|---:|" + "---:|" * len(keys))

@@ -8,7 +8,7 @@ Both modes of `jr.phase_diagram` on the same grid in one run, each after a compi
 the same grid shape: `batch="scan"` (one jitted `lax.scan` over the gaps per Psi0) and
 `batch="vmap"` (all Psi0 in one jitted call, `vmap` over Psi0 of the same scan). Recorded:
 compile and run times, the largest differences between the two (alpha_c, fold heights) and
-whether kinds, start codes and warm starts agree everywhere. Before `jaxrod._linalg`, the
+whether kinds, start codes and warm starts agree everywhere. Before `jaxrod.linalg.batched`, the
 vmapped call deadlocked XLA:CPU on 2 cores (batched LAPACK LU in two concurrent branches).
 
 Results: benchmarks/results/phase.json and phase.md (device recorded).
@@ -36,7 +36,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxrod as jr  # noqa: E402
-from jaxrod import _phase  # noqa: E402
+from jaxrod.branches import _phase  # noqa: E402
 from bench_batch import _git  # noqa: E402  (the commit recorded with the results, as bench_batch does)
 
 

@@ -55,7 +55,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxrod as jr  # noqa: E402
-from jaxrod._energy.geometry import discretize  # noqa: E402
+from jaxrod.energy.geometry import discretize  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"

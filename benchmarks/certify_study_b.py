@@ -33,7 +33,7 @@ jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
 
-import design as ds  # noqa: E402
+import jaxrod.design as ds  # noqa: E402
 import jaxrod as jr  # noqa: E402
 
 

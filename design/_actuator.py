@@ -66,13 +66,14 @@ import numpy as np
 from jax import lax
 
 import jaxrod as jr
-from jaxrod._continuation import AbstractParameter, Continuation, LeftAlpha
-from jaxrod._critical import critical_point
-from jaxrod._energy.lagrangian import positions
-from jaxrod._initial import _initial_state
-from jaxrod._kkt import modes, smallest_eigenvalues, structured
-from jaxrod._snap import _path
-from jaxrod._solution import RESULTS, Equilibrium
+from jaxrod.branches import AbstractParameter, Continuation, LeftAlpha
+from jaxrod.branches import critical_point
+from jaxrod.energy.lagrangian import positions
+from jaxrod.statics import initial_state_signed
+from jaxrod.linalg.kkt import modes, smallest_eigenvalues, structured
+from jaxrod.branches import follow_path
+from jaxrod.results import RESULTS
+from jaxrod.statics import Equilibrium
 
 
 # ----- per-half observable --------------------------------------------------------------
@@ -139,7 +140,7 @@ def _segment(scene, theta, force, a0, a1, settings):
     par = LinePath(a0, (a1 - a0) / length)
     sc0 = _at(scene, a0)
     eq = Equilibrium(theta, force, RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), sc0)
-    p = _path(sc0, eq, 1.0, par, settings, length + OVERSHOOT, 48, 1e-9, stages=2)
+    p = follow_path(sc0, eq, 1.0, par, settings, length + OVERSHOOT, 48, 1e-9, stages=2)
     snaps = p.snaps & (p.alpha_c <= length)
     br = jax.tree.map(lambda x: x[0], p.branch)
     idx = jnp.arange(br.lam.shape[0])
@@ -274,7 +275,7 @@ def _one_sided(scene, theta, force, direction, parameter, settings):
     sc = sg(scene)
     eq = Equilibrium(sg(theta), sg(force), RESULTS.successful, jnp.zeros((), jnp.int32),
                      jnp.zeros((), jnp.int32), sc)
-    p = _path(sc, eq, direction, parameter, settings, jnp.pi, 48, 1e-9, stages=1)
+    p = follow_path(sc, eq, direction, parameter, settings, jnp.pi, 48, 1e-9, stages=1)
     a0 = jnp.where(p.snaps, p.alpha_c, parameter.get(sc))
     scc = parameter.set(sc, a0)
     K = structured(p.theta_before, p.force_before, scc)
@@ -295,7 +296,7 @@ def _ud_margin_fn(psi0_deg, gap, s0, n, margin_deg, settings):
 
     def f(beta):
         sc = _at(base, jnp.stack([beta, beta]))
-        eq0 = _initial_state(lax.stop_gradient(sc), -1.0)
+        eq0 = initial_state_signed(lax.stop_gradient(sc), -1.0)
         r = _one_sided(sc, eq0.theta, eq0.force, 1.0, LeftAlpha(), settings)
         sc1 = _at(base, jnp.stack([r["alpha_c"] + dm, beta]))
         eq1 = jr.solve_equilibrium(sc1, r["theta_after"], r["force_after"])

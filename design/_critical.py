@@ -20,7 +20,7 @@ $F(x;\alpha,p)=\nabla_x\tilde{\mathcal L}$ the equilibrium residual, $K=\partial
   with $x_q\perp w$.
 
 Dense $(N+2)\times(N+2)$ linear algebra: this is meant for design meshes ($N\le 400$). It goes
-through `jaxrod._linalg` (one LAPACK call per member under `vmap`): the up and down
+through `jaxrod.linalg.batched` (one LAPACK call per member under `vmap`): the up and down
 sensitivities run concurrently, and batched LAPACK calls in two concurrent branches can
 deadlock XLA:CPU (see that module).
 When `jaxrod.snap_angles` becomes differentiable itself, these rules remain an independent
@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 
 import jaxrod as jr
-from jaxrod import _linalg
+from jaxrod.linalg import batched
 
 
 class Critical(eqx.Module):
@@ -70,7 +70,7 @@ def critical_sensitivity(theta, force, alpha, params, kind, n):
     q = jnp.concatenate([jnp.reshape(alpha, (1,)), params])
     F = jax.grad(_lag, argnums=0)
     K = jax.hessian(_lag, argnums=0)(x, q, n)
-    lam, vec = _linalg.eigh(K)
+    lam, vec = batched.eigh(K)
     w = vec[:, jnp.argmin(jnp.abs(lam))]
     # fold
     gq = jax.grad(lambda qq: jnp.dot(w, F(x, qq, n)))(q)
@@ -78,7 +78,7 @@ def critical_sensitivity(theta, force, alpha, params, kind, n):
     # branch point
     Fq = jax.jacfwd(F, argnums=1)(x, q, n)  # (N+2, 4)
     c = jnp.max(jnp.abs(jnp.diag(K)))
-    xq = -_linalg.solve(K + c * jnp.outer(w, w), Fq)
+    xq = -batched.solve(K + c * jnp.outer(w, w), Fq)
 
     def sigma(xx, qq):
         return jnp.dot(w, jax.jvp(lambda y: F(y, qq, n), (xx,), (w,))[1])

@@ -160,7 +160,7 @@ def alpha_c_benchmark(psi0_deg, gap, n=None):
 def np_crossings(x, tol=1e-12):
     """Pairs (i, j), j >= i + 2, of segments [x_i, x_i+1], [x_j, x_j+1] that meet, by
     solving p + t r = q + u s for (t, u) (non-parallel segments only): an independent
-    numpy check of `jaxrod._contact`."""
+    numpy check of `jaxrod.energy.contact`."""
     n = len(x) - 1
     out = []
     for i in range(n):

@@ -10,9 +10,9 @@ import math
 import numpy as np
 import pytest
 
-import design as ds
+import jaxrod.design as ds
 import jaxrod as jr
-from design import _actuator as act
+from jaxrod.design import _actuator as act
 
 
 PSI0, GAP, BETA = 45.0, 0.5, -126.0  # BETA: close to the optimum of the held angle (-126.26 deg at N = 40)

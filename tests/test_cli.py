@@ -18,7 +18,7 @@ import jax
 import pytest
 
 import jaxrod as jr
-from jaxrod._cli import main
+from jaxrod.cli._main import main
 
 
 REQUIRED = {
@@ -31,7 +31,7 @@ SCENE = ["--psi0", "60", "--gap", "0.5", "--alpha", "0"]
 
 
 def _cli(args, env=None, timeout=600):
-    return subprocess.run([sys.executable, "-m", "jaxrod._cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "jaxrod", *args], capture_output=True, text=True,
                           env=env, timeout=timeout)
 
 
@@ -201,7 +201,7 @@ def test_bad_input_subprocess():
         (["equilibrium", "--state", "sideways"], "--state"),
         (["frobnicate"], "frobnicate"),
     ]
-    procs = [(subprocess.Popen([sys.executable, "-m", "jaxrod._cli", *a], stdout=subprocess.PIPE,
+    procs = [(subprocess.Popen([sys.executable, "-m", "jaxrod", *a], stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True), needle) for a, needle in cases]
     for p, needle in procs:
         out, err = p.communicate(timeout=300)

@@ -1,4 +1,4 @@
-"""Self-contact check (`jaxrod._contact`): segment distances against hand-built answers and
+"""Self-contact check (`jaxrod.energy.contact`): segment distances against hand-built answers and
 a brute-force reference, real strip states with and without self-crossing, vmap and gradients."""
 
 import functools
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import jaxrod as jr
-from jaxrod import _contact
+from jaxrod.energy import contact as _contact
 from helpers import central_difference, np_crossings
 
 

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import jaxrod as jr
-from jaxrod import _kkt
-from jaxrod._critical import _fold_residual, extended_jacobian
+from jaxrod.linalg import kkt
+from jaxrod.branches._critical import _fold_residual, extended_jacobian
 from helpers import central_difference, count_compiles
 
 
@@ -81,11 +81,11 @@ def test_extended_system_converges_to_1e8(snap, base, refine):
         sc = jr.SymmetricAlpha().set(base, cp.alpha)
         gt, gm = jax.grad(jr.lagrangian, argnums=(0, 1))(cp.theta, cp.force, sc)
         assert float(jnp.max(jnp.abs(gt))) < 1e-9 and float(jnp.max(jnp.abs(gm))) < 1e-9
-        K = _kkt.structured(cp.theta, cp.force, sc).dense()
+        K = kkt.structured(cp.theta, cp.force, sc).dense()
         kv = K @ jnp.concatenate([cp.mode, cp.mode_force])
         assert float(jnp.max(jnp.abs(kv))) < 1e-8 * float(jnp.max(jnp.abs(K)))
         # the critical state has a zero constrained eigenvalue, none below it
-        lam = _kkt.smallest_eigenvalues(_kkt.structured(cp.theta, cp.force, sc), 2)
+        lam = kkt.smallest_eigenvalues(kkt.structured(cp.theta, cp.force, sc), 2)
         assert abs(float(lam[0])) < 1e-7 and float(lam[1]) > 1e-2
         # the mode is asymmetric at the branch point, symmetric at the fold
         parity = float(jnp.sum(cp.mode * -cp.mode[::-1]) / jnp.sum(cp.mode**2))

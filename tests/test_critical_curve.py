@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import jaxrod as jr
-from jaxrod._critical_curve import END_BOUND, END_TURN
+from jaxrod.branches._critical_curve import END_BOUND, END_TURN
 
 
 jax.config.update("jax_enable_x64", True)

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import design as ds
+import jaxrod.design as ds
 import jaxrod as jr
 from helpers import central_difference, count_compiles
 
@@ -143,7 +143,7 @@ def test_result_save_and_load_roundtrip(multistart, tmp_path):
 
 
 def test_golden_max_finds_the_maximum_and_keeps_a_better_start():
-    from design._studies import golden_max
+    from jaxrod.design._studies import golden_max
 
     f = lambda x: -(x - 26.5) ** 2 + 1e-4 * math.sin(40 * x)  # noqa: E731  (a max with small wiggles)
     x, v, evals = golden_max(f, 10.0, 60.0, xtol=0.05)
@@ -157,8 +157,8 @@ def test_golden_max_finds_the_maximum_and_keeps_a_better_start():
 def test_psi0_polish_reaches_the_scanned_maximum_on_the_compiled_problem(multistart):
     """`_polish_psi0` (study (b)'s last step) maximizes the first term's value over Psi0 at the
     design's gap; here the fold height of the down state, cheap: checked against a scan."""
-    from design._optimize import _linearize_batch
-    from design._studies import _polish_psi0
+    from jaxrod.design._optimize import _linearize_batch
+    from jaxrod.design._studies import _polish_psi0
 
     _, res = multistart
     b = res.best
@@ -255,7 +255,7 @@ def test_problems_differing_only_in_targets_share_one_program(problem):
     """Targets, tolerances and weights are data (`Problem.numbers`), not part of the compiled
     program: a problem with other numbers but the same terms reuses the compiled call and
     still gets its own residuals r = sqrt(w) (v - target) / tol."""
-    from design._optimize import _linearize_batch
+    from jaxrod.design._optimize import _linearize_batch
 
     z = PARAM.from_values(psi0_deg=70.0, gap=0.5)[None]
     r1, _, v1 = _linearize_batch(problem, z)

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from jaxrod._cli import main
+from jaxrod.cli._main import main
 
 
 @pytest.mark.parametrize("argv, word", [

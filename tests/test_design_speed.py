@@ -17,9 +17,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import design as ds
+import jaxrod.design as ds
 import jaxrod as jr
-from jaxrod._cli import main
+from jaxrod.cli._main import main
 
 
 N, N_CHECK = 16, 24
@@ -80,7 +80,7 @@ def test_snap_speed_gradient_in_the_design_loop_matches_central_differences():
     unconstrained z of the parametrization, the compiled function of study (b)) vs central
     differences of the same function's residual r = v_s - 100. z steps 4e-4, 8e-4 are
     3e-4 rad in Psi0 and 1e-4 in G/L at (90 deg, 0.46): the N = 16 steps above."""
-    from design._optimize import _linearize_batch
+    from jaxrod.design._optimize import _linearize_batch
 
     problem = _study_b_problem(N)
     z0 = problem.param.from_values(psi0_deg=90.0, gap=0.46)

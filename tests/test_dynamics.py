@@ -1,4 +1,4 @@
-"""Snap dynamics on the statics' energy (jaxrod._dynamics*): equations, energy balance,
+"""Snap dynamics on the statics' energy (jaxrod.dynamics): equations, energy balance,
 convergence, scenes, bad input. Small meshes (N = 24) keep the explicit runs short."""
 
 import math
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import jaxrod as jr
-from jaxrod._dynamics import accelerations, scene_at
-from jaxrod._energy.bending import bending_energy
-from jaxrod._energy.geometry import discretize
+from jaxrod.dynamics._equations import accelerations, scene_at
+from jaxrod.energy.bending import bending_energy
+from jaxrod.energy.geometry import discretize
 
 
 N = 24

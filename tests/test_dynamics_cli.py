@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from jaxrod._cli import main
+from jaxrod.cli._main import main
 
 
 @pytest.mark.parametrize("argv, name", [
@@ -32,7 +32,7 @@ def test_snap_json(capsys, tmp_path):
     for k in ("alpha_c_deg", "v_s", "t_snap", "bending_energy_before", "kinetic_energy_peak", "energy_drift"):
         assert rec[k] is not None
     # the default RATTLE's energy error is bounded, O(dt^2): 1.4e-3 at N = 24 (its step is the
-    # 2e-4 T cap there; jaxrod._dynamics_solve.DT_CAP); adaptive Tsit5 at 1e-8 conserves it tightly
+    # 2e-4 T cap there; jaxrod.dynamics._simulate.DT_CAP); adaptive Tsit5 at 1e-8 conserves it tightly
     assert rec["snapped"] and rec["energy_drift"] < 3e-3, rec["energy_drift"]
     assert (tmp_path / "speed_map.png").exists()
     rc = main(["snap", "--psi0", "30", "--gap", "0.5", "--n", "24", "--json", "--solver", "tsit5", "--rtol", "1e-8"])

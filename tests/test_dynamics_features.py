@@ -5,7 +5,7 @@ and a physical strip (`jr.Strip.from_physical`) fed into `jr.simulate`.
 Every check compares with something computed here, independently of the integrator:
 - dissipation: the energy lost over a window equals the work of the dissipative forces,
   integrated from the trajectory's own frames with the formulas of MODEL.md /
-  `jaxrod._dynamics` (drag power -c_d sum_k (m_k / lambda) |v_k|^3, viscous power
+  `jaxrod.dynamics._equations` (drag power -c_d sum_k (m_k / lambda) |v_k|^3, viscous power
   -eta sum_k phidot_k^2 / ell_k, damping power -gamma sum_k m_k |v_k|^2);
 - gravity: the initial acceleration of a strip released from rest is the mass-weighted
   projection of uniform gravity onto the motions the links allow (Gauss's principle of least
@@ -26,8 +26,8 @@ import numpy as np
 import pytest
 
 import jaxrod as jr
-from jaxrod._dynamics_scenes import project
-from jaxrod._energy.geometry import discretize
+from jaxrod.dynamics._scenes import project
+from jaxrod.energy.geometry import discretize
 
 N = 24
 T1 = 0.8

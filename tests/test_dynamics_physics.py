@@ -11,7 +11,7 @@ import numpy as np
 
 import jaxrod as jr
 from helpers import central_difference
-from jaxrod._dynamics_scenes import mirror_seed
+from jaxrod.dynamics._scenes import mirror_seed
 
 
 def _scene(p, n, alpha):

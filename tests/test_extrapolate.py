@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import jaxrod as jr
-from jaxrod._extrapolate import _combine
+from jaxrod.branches._extrapolate import _combine
 
 
 jax.config.update("jax_enable_x64", True)
@@ -75,7 +75,7 @@ def test_combination_and_fallback():
 
 
 def test_cli_default_is_extrapolated(capsys):
-    from jaxrod._cli import main
+    from jaxrod.cli._main import main
 
     assert main(["snap-angles", "--psi0", "60", "--gap", "0.5", "--json"]) == 0
     rec = json.loads(capsys.readouterr().out)

@@ -167,7 +167,7 @@ def test_float32():
     # the dtype rules stated in the docstring
     with jax.enable_x64(False):
         scene_ctx = jr.make_scene(60.0, 0.5, n=100)
-    from jaxrod._energy.geometry import scene_dtype
+    from jaxrod.energy.geometry import scene_dtype
 
     assert scene_dtype(scene_ctx) == jnp.float64
     with jax.enable_x64(False):

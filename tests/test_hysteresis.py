@@ -75,7 +75,7 @@ def test_passes_turning_point_and_comes_back(loop):
 
 
 def test_cli_hysteresis(loop, tmp_path, capsys):
-    from jaxrod._cli import main
+    from jaxrod.cli._main import main
 
     png = tmp_path / "loop.png"
     assert main(["hysteresis", "--psi0", "60", "--gap", "0.5", "--plot", str(png), "--json"]) == 0

@@ -1,4 +1,4 @@
-"""The batching-aware linear solves of `jaxrod._linalg`: every dispatch route (one LAPACK
+"""The batching-aware linear solves of `jaxrod.linalg.batched`: every dispatch route (one LAPACK
 call, an inline batched call, a loop over members, the pivoting scan, nested vmaps) gives
 LAPACK's answer, derivatives match the plain solve's, and a vmap that used to deadlock
 XLA:CPU (two concurrent batched LAPACK calls) completes."""
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from jax import lax
 
-from jaxrod import _linalg as L
+from jaxrod.linalg import batched as L
 
 
 def bands(rng, shape, n, weak_diagonal=True):
@@ -162,7 +162,7 @@ def test_concurrent_batched_solves_do_not_deadlock():
     code = textwrap.dedent("""
         import jax, jax.numpy as jnp, numpy as np
         jax.config.update("jax_enable_x64", True)
-        from jaxrod import _linalg as L
+        from jaxrod.linalg import batched as L
         rng = np.random.default_rng(0)
         A = jnp.asarray(rng.normal(size=(2, 41, 205, 205)) + 60 * np.eye(205))
         b = jnp.asarray(rng.normal(size=(2, 41, 205)))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import jaxrod as jr
-from jaxrod import _phase
+from jaxrod.branches import _phase
 
 
 def _fake_chunk(calls):
@@ -97,7 +97,7 @@ def test_figure_and_termination_hook(tmp_path, monkeypatch):
     (["--gaps", "nan"], "gap"),
 ])
 def test_cli_bad_input(argv, name, capsys, tmp_path):
-    from jaxrod._cli import main
+    from jaxrod.cli._main import main
 
     assert main(["phase-diagram", "--out", str(tmp_path), *argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -107,7 +107,7 @@ def test_cli_bad_input(argv, name, capsys, tmp_path):
 def test_cli_json(tmp_path, monkeypatch, capsys):
     calls = []
     monkeypatch.setattr(_phase, "_chunk", _fake_chunk(calls))
-    from jaxrod._cli import main
+    from jaxrod.cli._main import main
 
     out = tmp_path / "pd"
     assert main(["phase-diagram", "--psi0", "60,180", "--gaps", "0.2:0.6:0.2", "--out", str(out),
@@ -179,7 +179,7 @@ def test_vmap_mode_computes_missing_chunks_in_one_call(tmp_path, monkeypatch):
 
 def test_one_vmapped_call_equals_the_chunks():
     """The real computation as one jitted, vmapped call over Psi0 (`batch="vmap"`; batched
-    linear algebra through `jaxrod._linalg`, the homotopy fallback a masked while loop)
+    linear algebra through `jaxrod.linalg.batched`, the homotopy fallback a masked while loop)
     gives the per-Psi0 chunks' numbers: same kinds, start codes and warm starts, alpha_c
     and fold heights to 1e-9. The grid includes a gap with no down state (30 deg, 0.8),
     where only that member falls back to the homotopy."""

@@ -168,7 +168,7 @@ def clearance(theta, sc):
     return float(np.min(np.where(crossing, 0.0, dist)))
 
 
-# the library flags a state whose clearance is <= 1e-9 L (`jaxrod._contact.TOL`): a successful
+# the library flags a state whose clearance is <= 1e-9 L (`jaxrod.energy.contact.TOL`): a successful
 # state has more, a flagged one (crossing or touching) less than the margin below
 CLEAR_TOL = 1e-9
 

@@ -1,4 +1,4 @@
-"""RATTLE, the default snap integrator (jaxrod._rattle): exact constraints, second-order and
+"""RATTLE, the default snap integrator (jaxrod.dynamics._rattle): exact constraints, second-order and
 bounded energy error, v_s against the adaptive reference, gradients, bad input. N <= 24."""
 
 import math
@@ -66,7 +66,7 @@ def test_no_energy_drift_over_long_times():
     """Symplectic: a stable state set vibrating (1e-2 rad, mirror-breaking), undamped, for
     200 periods of its slowest mode: the energy error oscillates, bounded, instead of growing
     (the largest error in the last fifth is no larger than in the first fifth, x1.5)."""
-    from jaxrod._dynamics_scenes import mirror_seed
+    from jaxrod.dynamics._scenes import mirror_seed
 
     sc = jr.make_scene(60, 0.5, 0, n=16)
     down = jr.initial_state(sc, "down")

@@ -8,7 +8,7 @@ import math
 import pytest
 
 import jaxrod as jr
-from design import _reproduce as rp
+from jaxrod.cli import _reproduce as rp
 
 CFG = dict(n=24, solver="rattle", psis=(30.0, 90.0, 180.0), gaps=(0.3, 0.5))  # the product's integrator
 
@@ -31,7 +31,7 @@ def test_speed_plane_points_and_fit(report):
     assert len(snapping) >= 4
     for r in snapping:
         # RATTLE's energy error is bounded, O(dt^2): at N = 24 its step is the 2e-4 T cap and the
-        # measured error is 0.9e-3 here, 1.1e-3 in jaxrod._dynamics_solve (DT_CAP); a wrong force
+        # measured error is 0.9e-3 here, 1.1e-3 in jaxrod.dynamics._simulate (DT_CAP); a wrong force
         # or a broken constraint gives O(1) (benchmarks/results/dynamics.md: 6.8e-5 at N = 100)
         assert math.isfinite(r["v_s"]) and r["v_s"] > 0 and r["energy_drift"] < 3e-3, (r["energy_drift"], r)
     # the fit: speed falls with the gap and with the fold angle (the paper's a, b > 0)

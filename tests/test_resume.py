@@ -24,7 +24,8 @@ import types
 import numpy as np
 import pytest
 
-from jaxrod import _cli_dynamics, _phase
+from jaxrod.cli import _dynamics as _cli_dynamics
+from jaxrod.branches import _phase
 
 ENV = dict(os.environ, JAXROD_NO_CACHE="1")
 ENV.pop("JAX_COMPILATION_CACHE_DIR", None)
@@ -290,7 +291,7 @@ def test_speed_plane_torn_rows_and_other_settings(tmp_path, monkeypatch, capsys)
     file) is dropped and its point recomputed, not trusted and no crash; rows computed
     with other settings are not reused (and are kept); a file without the settings columns
     is refused with one line."""
-    from jaxrod._cli import main
+    from jaxrod.cli._main import main
 
     calls = []
     _fake_dynamics(monkeypatch, calls)

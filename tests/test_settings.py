@@ -15,8 +15,8 @@ import jax.numpy as jnp
 import pytest
 
 import jaxrod as jr
-from jaxrod._cli import main
-from jaxrod._critical import CriticalPoint
+from jaxrod.cli._main import main
+from jaxrod.branches._critical import CriticalPoint
 
 
 NAN, INF = float("nan"), math.inf

@@ -84,7 +84,7 @@ def test_float32_refused():
 def test_cli_snap_angles_json(snap, capsys):
     import json
 
-    from jaxrod._cli import main
+    from jaxrod.cli._main import main
 
     assert main(["snap-angles", "--psi0", "60", "--gap", "0.5", "--json", "--no-extrapolate"]) == 0
     rec = json.loads(capsys.readouterr().out)
@@ -122,7 +122,7 @@ def test_failed_landing_is_reported_not_dropped(snap, monkeypatch):
     """Where the strip loses stability but the relaxation past alpha_c finds no
     equilibrium, the loss of stability stands (alpha_c, kind) and `result` says the
     landing failed; before, the path went on to a second stage and read as no snap."""
-    from jaxrod import _snap
+    from jaxrod.branches import _snap
 
     real = _snap._land
 
@@ -145,7 +145,7 @@ def test_cli_snap_angles_reports_an_unknown_path(monkeypatch, capsys):
     """The CLI exits with 3 and names the result where a path's outcome is unknown."""
     import json
 
-    from jaxrod import _cli
+    from jaxrod.cli import _main as _cli
 
     real = jr.snap_angles
     monkeypatch.setattr(jr, "snap_angles",

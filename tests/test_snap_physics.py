@@ -227,11 +227,11 @@ def _dense_hessians(psi0, gap, theta, force, lam, lam_mid):
     """Batched over points, each with its own scene (fold angle `psi0` in rad, `gap`; s0 and
     the mesh the defaults, 0.02 and N = 100): the dense bordered Hessian at the point and at
     a fresh plain-Newton solution at the parameter `lam_mid`, and that solve's code."""
-    from jaxrod._equilibrium import _float_scene
-    from jaxrod._rod import Clamps, Mesh, Scene, Strip
+    from jaxrod.statics._equilibrium import float_scene
+    from jaxrod.model._scene import Clamps, Mesh, Scene, Strip
 
     def one(p, g, t, m, a, a_mid):
-        sc = _float_scene(Scene(Strip(psi0=p, s0=0.02), Clamps(g), Mesh(100, 1.0)))
+        sc = float_scene(Scene(Strip(psi0=p, s0=0.02), Clamps(g), Mesh(100, 1.0)))
         eq = jr.Equilibrium(t, m, jr.RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32),
                             _at(sc, a))
         mid = jr.solve_equilibrium(_at(sc, a_mid), t, m, solver=jr.Newton(minimize=False))
@@ -346,8 +346,8 @@ def test_phase_diagram_walks_miss_no_instability():
     """No missed branch point (or fold) anywhere on the phase-diagram grid (5 Psi0 x 41
     gaps, N = 100), on the walks `phase_diagram` itself makes (its warm-started chunks, the
     walked branches kept): `_check_walks` on every path whose start state exists."""
-    from jaxrod._phase import _chunk
-    from jaxrod._rod import Mesh
+    from jaxrod.branches._phase import _chunk
+    from jaxrod.model._scene import Mesh
 
     walks = []
     for psi0 in GRID_PSI0:

@@ -1,7 +1,7 @@
 r"""Structured Hessian, Sturm-count eigenvalues and modes against dense references.
 
 The constrained stiffness problem is $T v + P w = \lambda v$, $P^\top v + C w = 0$
-(`jaxrod/_kkt.py`). Dense references: `jax.hessian` of `jr.lagrangian` for the matrix, and
+(`jaxrod/linalg/kkt.py`). Dense references: `jax.hessian` of `jr.lagrangian` for the matrix, and
 `numpy.linalg.eigvalsh` of `jr.dense_reduced_hessian` for the spectrum.
 """
 

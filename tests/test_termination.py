@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import jaxrod as jr
-from jaxrod._cli import main
+from jaxrod.cli._main import main
 
 
 jax.config.update("jax_enable_x64", True)
@@ -36,7 +36,7 @@ def test_flat_strip_never_stops():
     flat strip's snap-up path onto its snap-down path; and alpha_c / sqrt(1 - G/L) -> 2 rad,
     the shallow-arch limit of the linear theory (derived in tests/test_snap_physics.py),
     approached from above with a deviation O(1 - G/L)."""
-    from jaxrod._snap import KIND_NAMES
+    from jaxrod.branches._snap import KIND_NAMES
 
     r = jr.termination_gap(180.0)
     assert r.gap_up == 1.0 and r.gap_down == 1.0
@@ -84,7 +84,7 @@ def test_reported_gap_is_the_exact_end_where_located():
     """`gap_*` is the exact end of the path where it was found (the cusp by continuation,
     else the direct cusp solve; the start state's fold in G), the bisection value otherwise;
     an end outside the bracket's reach is not taken."""
-    from jaxrod._termination import _exact_end
+    from jaxrod.branches._termination import _exact_end
 
     def res(reason, **kw):
         r = dict(gap=0.6375, bracket=(0.63749, 0.63751), reason=reason, **kw)
@@ -213,7 +213,7 @@ def test_start_state_fold_in_the_gap_and_derivative_fd():
     and dG_f/dPsi0 (implicit differentiation) matches central differences that re-solve it."""
     import jax.numpy as jnp
 
-    from jaxrod._termination import _state_fold_gap
+    from jaxrod.branches._termination import _state_fold_gap
 
     n = 40
     base = jr.make_scene(30.0, 0.5, 0.0, n=n)

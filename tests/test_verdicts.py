@@ -11,8 +11,8 @@ import pytest
 
 import jaxrod as jr
 from helpers import crosses
-from jaxrod._snap import KIND_FOLD, _polish
-from jaxrod._continuation import SymmetricAlpha
+from jaxrod.branches._snap import KIND_FOLD, _polish
+from jaxrod.branches._continuation import SymmetricAlpha
 
 N = 100
 OK = jr.RESULTS.successful

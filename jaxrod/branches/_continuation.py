@@ -1,0 +1,343 @@
+r"""Pseudo-arclength continuation of equilibria in one parameter, inside `jit`.
+
+The equilibria solve $F(x,\lambda)=\nabla\tilde{\mathcal L}(x;\lambda)=0$ with
+$x=(\theta,\mu)$. Steps follow the branch through turning points:
+
+* predictor $x_p = x + \Delta s\,\tau_x$, $\lambda_p=\lambda+\Delta s\,\tau_\lambda$;
+* corrector: Newton on $F=0$ together with the arclength condition
+  $\langle\tau_x, x-x_p\rangle_W + \tau_\lambda(\lambda-\lambda_p)=0$, whose Jacobian
+  $\begin{pmatrix}\mathsf K & F_\lambda\\ c^\top & \tau_\lambda\end{pmatrix}$ is solved by
+  block elimination on the structured $\mathsf K$ (plus one step of iterative refinement,
+  which keeps it accurate where $\mathsf K$ is nearly singular, at folds);
+* new tangent from the same bordered matrix with right-hand side $(0, 1)$, which keeps
+  the orientation ($\tau_{\rm old}\cdot\tau_{\rm new}>0$).
+
+$\langle a,b\rangle_W=\sum_i h_i a_{\theta_i} b_{\theta_i}$ (the $L^2$ norm of the angle
+field; the force is not part of the arclength). Along the branch the number
+$\nu$ of negative eigenvalues of the constrained Hessian (asymmetric modes included) is
+recorded at every point. Fixed-size buffers, `lax.while_loop`: jittable and vmappable.
+"""
+
+from __future__ import annotations
+
+import abc
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+from jaxtyping import Array
+
+from ..linalg import kkt
+from ..energy.geometry import discretize
+from ..energy.lagrangian import lagrangian, positions
+from ..statics import float_scene
+from .._misc import check_bool, check_int, check_number, check_sign, is_concrete
+from ..results import RESULTS
+
+
+def require_float64(dtype, what):
+    """Continuation and critical-point refinement need float64: in float32 the Sturm
+    count near a singular Hessian and the 1e-8 rad refinement are below round-off."""
+    if dtype != jnp.float64:
+        raise ValueError(
+            f"{what} needs float64; enable it with jax.config.update('jax_enable_x64', True) "
+            "before building the scene (float32 is supported only by solve_equilibrium and "
+            "initial_state, to the tolerance in the README's 'Result codes' section)"
+        )
+
+
+class AbstractParameter(eqx.Module):
+    """The continuation parameter: how to read it from and write it into a scene."""
+
+    @abc.abstractmethod
+    def get(self, scene):
+        """Current value of the parameter in `scene`."""
+
+    @abc.abstractmethod
+    def set(self, scene, value):
+        """A copy of `scene` with the parameter set to `value`."""
+
+
+class SymmetricAlpha(AbstractParameter):
+    r"""Both clamp angles, $\alpha_L=\alpha_R=\alpha$ (radians)."""
+
+    def get(self, scene):
+        return scene.clamps.alpha_left
+
+    def set(self, scene, value):
+        return eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (value, value))
+
+
+class LeftAlpha(AbstractParameter):
+    r"""The left clamp angle $\alpha_L$ alone (the right one stays fixed)."""
+
+    def get(self, scene):
+        return scene.clamps.alpha_left
+
+    def set(self, scene, value):
+        return eqx.tree_at(lambda s: s.clamps.alpha_left, scene, value)
+
+
+class RightAlpha(AbstractParameter):
+    r"""The right clamp angle $\alpha_R$ alone."""
+
+    def get(self, scene):
+        return scene.clamps.alpha_right
+
+    def set(self, scene, value):
+        return eqx.tree_at(lambda s: s.clamps.alpha_right, scene, value)
+
+
+class Gap(AbstractParameter):
+    """The gap G."""
+
+    def get(self, scene):
+        return scene.clamps.gap
+
+    def set(self, scene, value):
+        return eqx.tree_at(lambda s: s.clamps.gap, scene, value)
+
+
+class Continuation(eqx.Module):
+    """Step control of [`jaxrod.continue_branch`][]: initial, smallest and largest
+    arclength step, buffer size `max_points`, corrector iterations and tolerance."""
+
+    ds: float = eqx.field(static=True, default=0.05)
+    ds_min: float = eqx.field(static=True, default=1e-7)
+    ds_max: float = eqx.field(static=True, default=0.2)
+    max_points: int = eqx.field(static=True, default=400)
+    corrector_steps: int = eqx.field(static=True, default=8)
+    tol: float | None = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        for name in ("ds", "ds_min", "ds_max"):
+            check_number(name, getattr(self, name), lo=0.0)
+        if self.ds_min > self.ds_max:
+            raise ValueError(f"ds_min must not exceed ds_max, got ds_min={self.ds_min!r}, ds_max={self.ds_max!r}")
+        check_int("max_points", self.max_points, lo=2)
+        check_int("corrector_steps", self.corrector_steps, lo=1)
+        if self.tol is not None:
+            check_number("tol", self.tol, lo=0.0)
+
+
+class Branch(eqx.Module):
+    """A computed branch: fixed-size buffers, valid up to `count`.
+
+    `lam` parameter values, `theta` (M, N), `force` (M, 2), `tau_lam` the parameter
+    component of the unit tangent (its sign change marks a fold), `num_unstable`,
+    `fold_height`, `ds` the step that led to each point; `stop` the reason the
+    continuation ended (0: buffer full, 1: parameter bound, 2: stability changed,
+    3: step too small)."""
+
+    lam: Array
+    theta: Array
+    force: Array
+    tau_lam: Array
+    num_unstable: Array
+    fold_height: Array
+    ds: Array
+    count: Array
+    stop: Array
+
+    @property
+    def result(self):
+        """`continuation_incomplete` where the branch stopped on a full buffer (`stop` 0) or a
+        step below `ds_min` (3), else `successful` (the bound, 1, or a loss of stability, 2)."""
+        return RESULTS.where((self.stop == 0) | (self.stop == 3), RESULTS.continuation_incomplete,
+                             RESULTS.successful)
+
+
+def _pieces(scene, parameter):
+    """Residual F(x, lam), its lam-derivative and the structured Jacobian."""
+
+    def grad_at(t, m, lam):
+        sc = parameter.set(scene, lam)
+        return jax.grad(lagrangian, argnums=(0, 1))(t, m, sc, discretize(sc))
+
+    def F(t, m, lam):
+        return grad_at(t, m, lam)
+
+    def F_lam(t, m, lam):
+        return jax.jvp(lambda ll: grad_at(t, m, ll), (lam,), (jnp.ones_like(lam),))[1]
+
+    def K(t, m, lam):
+        return kkt.structured(t, m, parameter.set(scene, lam))
+
+    return F, F_lam, K
+
+
+def _bordered_solve(Kmat, Flam, c, clam, r_t, r_m, r_s):
+    """Solve [[K, F_lam], [(c, 0)^T, clam]] (dt, dm, dlam) = (r_t, r_m, r_s) with one
+    step of iterative refinement."""
+
+    def once(rt, rm, rs):
+        at, am = kkt.solve(Kmat, rt, rm)
+        bt, bm = kkt.solve(Kmat, Flam[0], Flam[1])
+        dl = (rs - jnp.dot(c, at)) / (clam - jnp.dot(c, bt))
+        return at - bt * dl, am - bm * dl, dl
+
+    def apply(dt, dm, dl):
+        kt, km = kkt.matvec(Kmat, dt, dm)
+        return kt + Flam[0] * dl, km + Flam[1] * dl, jnp.dot(c, dt) + clam * dl
+
+    dt, dm, dl = once(r_t, r_m, r_s)
+    at, am, al = apply(dt, dm, dl)
+    et, em, el = once(r_t - at, r_m - am, r_s - al)
+    return dt + et, dm + em, dl + el
+
+
+def _tangent(Kmat, Flam, c, clam, w):
+    zt, zm, zl = _bordered_solve(Kmat, Flam, c, clam, jnp.zeros_like(c), jnp.zeros_like(Flam[1]),
+                                 jnp.ones_like(clam))
+    nrm = jnp.sqrt(jnp.sum(w * zt**2) + zl**2)
+    return zt / nrm, zm / nrm, zl / nrm
+
+
+def _residual_norm(g, scene):
+    st = scene.strip
+    return jnp.maximum(jnp.max(jnp.abs(g[0])) * st.length / st.bending_stiffness,
+                       jnp.max(jnp.abs(g[1])) / st.length)
+
+
+def corrector(scene, parameter, x0, lam0, tau, ds, steps, tol):
+    """Predict by `ds` along `tau` from (x0, lam0) and correct. Returns
+    (theta, mu, lam, converged, iterations)."""
+    F, F_lam, Kf = _pieces(scene, parameter)
+    d = discretize(scene)
+    w = d.h
+    t0, m0 = x0
+    tt, tm, tl = tau
+    tp, mp, lp = t0 + ds * tt, m0 + ds * tm, lam0 + ds * tl
+    c = w * tt
+
+    def body(carry):
+        t, m, lam, k, _ = carry
+        g = F(t, m, lam)
+        rs = jnp.dot(c, t - tp) + tl * (lam - lp)
+        Kmat = Kf(t, m, lam)
+        dt, dm, dl = _bordered_solve(Kmat, F_lam(t, m, lam), c, tl, -g[0], -g[1], -rs)
+        res = _residual_norm(g, scene)
+        conv = (res <= tol) & (jnp.abs(rs) <= tol)
+        t = jnp.where(conv, t, t + dt)
+        m = jnp.where(conv, m, m + dm)
+        lam = jnp.where(conv, lam, lam + dl)
+        return t, m, lam, k + 1, conv
+
+    def cond(carry):
+        t, m, lam, k, conv = carry
+        finite = jnp.all(jnp.isfinite(t)) & jnp.isfinite(lam)
+        return (~conv) & (k < steps) & finite
+
+    t, m, lam, k, conv = lax.while_loop(cond, body, (tp, mp, lp, jnp.zeros((), jnp.int32), jnp.zeros((), bool)))
+    return t, m, lam, conv, k
+
+
+def _count(scene, parameter, t, m, lam):
+    _, _, Kf = _pieces(scene, parameter)
+    return kkt.count_below(Kf(t, m, lam), jnp.zeros(1, t.dtype))[0]
+
+
+def _check_bounds(name, bounds):
+    """`bounds` = (lo, hi), lo < hi, neither NaN (infinite ends allowed); traced ends pass."""
+    try:
+        lo, hi = bounds
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a pair (lo, hi), got {bounds!r}") from None
+    for v in (lo, hi):
+        if is_concrete(v) and (np.ndim(v) != 0 or isinstance(v, (bool, str)) or np.isnan(float(v))):
+            raise ValueError(f"{name} must be a pair of numbers (lo, hi), got {bounds!r}")
+    if is_concrete(lo) and is_concrete(hi) and not float(lo) < float(hi):
+        raise ValueError(f"{name} must be (lo, hi) with lo < hi, got {bounds!r}")
+
+
+@eqx.filter_jit
+def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), *, direction: float = 1.0,
+                    bounds=(-jnp.pi, jnp.pi), settings: Continuation = Continuation(),
+                    stop_on_instability: bool = False) -> Branch:
+    r"""Follow the branch of equilibria through `eq` as `parameter` varies.
+
+    **Arguments:**
+    - `scene`, `eq`: the scene and an equilibrium of it (the start point).
+    - `parameter`: a [`jaxrod.SymmetricAlpha`][] (default), `LeftAlpha`, `RightAlpha`
+      or `Gap`.
+    - `direction`: +1 to start toward increasing parameter, -1 toward decreasing.
+    - `bounds`: stop once the parameter leaves this interval.
+    - `stop_on_instability`: stop at the first point whose unstable count differs from
+      the start's (a snap candidate).
+
+    **Returns:** a [`jaxrod.Branch`][].
+    """
+    check_sign("direction", direction)
+    _check_bounds("bounds", bounds)
+    if not isinstance(settings, Continuation):
+        raise ValueError(f"settings must be a jaxrod.Continuation, got {settings!r}")
+    check_bool("stop_on_instability", stop_on_instability)
+    scene = lax.stop_gradient(float_scene(scene))
+    dtype = eq.theta.dtype
+    require_float64(dtype, "continue_branch")
+    tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
+    F, F_lam, Kf = _pieces(scene, parameter)
+    d = discretize(scene)
+    w = d.h
+    M = settings.max_points
+    N = eq.theta.shape[0]
+    lam0 = jnp.asarray(parameter.get(scene), dtype)
+    t0, m0 = lax.stop_gradient(eq.theta), lax.stop_gradient(eq.force)
+    K0 = Kf(t0, m0, lam0)
+    # initial tangent: K z = -F_lam, tau = (z, 1) * direction, normalized
+    zt, zm = kkt.solve(K0, -F_lam(t0, m0, lam0)[0], -F_lam(t0, m0, lam0)[1])
+    nrm = jnp.sqrt(jnp.sum(w * zt**2) + 1.0)
+    tau0 = (direction * zt / nrm, direction * zm / nrm, direction * jnp.ones((), dtype) / nrm)
+    nu0 = kkt.count_below(K0, jnp.zeros(1, dtype))[0]
+    lo, hi = bounds
+
+    def fh(t, m, lam):
+        return positions(t, m, parameter.set(scene, lam))[N // 2, 1]
+
+    buf = dict(
+        lam=jnp.full((M,), jnp.nan, dtype).at[0].set(lam0),
+        theta=jnp.full((M, N), jnp.nan, dtype).at[0].set(t0),
+        force=jnp.full((M, 2), jnp.nan, dtype).at[0].set(m0),
+        tau_lam=jnp.full((M,), jnp.nan, dtype).at[0].set(tau0[2]),
+        num_unstable=jnp.full((M,), -1, jnp.int32).at[0].set(nu0),
+        fold_height=jnp.full((M,), jnp.nan, dtype).at[0].set(fh(t0, m0, lam0)),
+        ds=jnp.zeros((M,), dtype),
+    )
+    init = dict(buf=buf, i=jnp.ones((), jnp.int32), t=t0, m=m0, lam=lam0, tau=tau0,
+                ds=jnp.asarray(settings.ds, dtype), stop=jnp.full((), -1, jnp.int32))
+
+    def cond(c):
+        return (c["stop"] < 0) & (c["i"] < M)
+
+    def body(c):
+        t, m, lam, tau, ds = c["t"], c["m"], c["lam"], c["tau"], c["ds"]
+        tn, mn, ln, conv, k = corrector(scene, parameter, (t, m), lam, tau, ds, settings.corrector_steps, tol)
+        Kn = Kf(tn, mn, ln)
+        nt, nm, nl = _tangent(Kn, F_lam(tn, mn, ln), w * tau[0], tau[2], w)
+        nu = kkt.count_below(Kn, jnp.zeros(1, dtype))[0]
+        i = c["i"]
+        b = c["buf"]
+        nb = dict(
+            lam=b["lam"].at[i].set(ln), theta=b["theta"].at[i].set(tn), force=b["force"].at[i].set(mn),
+            tau_lam=b["tau_lam"].at[i].set(nl), num_unstable=b["num_unstable"].at[i].set(nu),
+            fold_height=b["fold_height"].at[i].set(fh(tn, mn, ln)), ds=b["ds"].at[i].set(ds),
+        )
+        b = jax.tree.map(lambda new, old: jnp.where(conv, new, old), nb, b)
+        i_new = jnp.where(conv, i + 1, i)
+        grow = jnp.where(k <= 3, 1.5, 1.0)
+        ds_new = jnp.where(conv, jnp.minimum(ds * grow, settings.ds_max), 0.5 * ds)
+        out_of_bounds = conv & ((ln < lo) | (ln > hi))
+        changed = conv & (nu != nu0) & stop_on_instability
+        too_small = ds_new < settings.ds_min
+        stop = jnp.where(out_of_bounds, 1, jnp.where(changed, 2, jnp.where(too_small, 3, -1)))
+        stop = jnp.where((stop < 0) & (i_new >= M), 0, stop).astype(jnp.int32)
+        keep = lambda new, old: jnp.where(conv, new, old)  # noqa: E731
+        return dict(buf=b, i=i_new, t=keep(tn, t), m=keep(mn, m), lam=keep(ln, lam),
+                    tau=jax.tree.map(keep, (nt, nm, nl), tau), ds=ds_new, stop=stop)
+
+    out = lax.while_loop(cond, body, init)
+    b = out["buf"]
+    return Branch(b["lam"], b["theta"], b["force"], b["tau_lam"], b["num_unstable"], b["fold_height"], b["ds"],
+                  out["i"], out["stop"])

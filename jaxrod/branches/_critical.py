@@ -1,0 +1,341 @@
+r"""Critical points (folds and symmetry-breaking branch points) as regular roots of an
+extended system, refined by Newton's method and differentiated implicitly.
+
+Let $x=(\theta,\mu)\in\mathbb R^{N+2}$, $F(x;\alpha)=\nabla_x\tilde{\mathcal L}$ the
+equilibrium residual of [`jaxrod.lagrangian`][] and $\mathsf K=\partial_xF$ the bordered
+Hessian (with the end force: $\mathsf K$ is singular exactly when the constrained
+stiffness of `jaxrod.linalg.kkt` has a zero eigenvalue, $T v_\theta+Pv_\mu=0$, $P^\top v_\theta=0$).
+We use the full $\mathsf K$ on $(\theta,\mu)$ (not the angle space restricted to
+$P^\top v=0$): the constraint is then part of $\mathsf K v=0$ and the null vector
+$v=(v_\theta,v_\mu)$ carries the change of end force along the mode.
+
+**Fold** (limit point in $\alpha$), the Moore-Spence system in
+$z=(\theta,\mu,\alpha,v_\theta,v_\mu)\in\mathbb R^{2N+5}$:
+
+$$F(x;\alpha)=0,\qquad \mathsf K(x;\alpha)\,v=0,\qquad \ell^\top v_\theta=1,$$
+
+regular at a generic fold ($v^\top F_\alpha\ne0$, $\tilde{\mathcal L}'''[v,v,v]\ne0$).
+
+**Branch point** under symmetric actuation. With the mirror
+$S(\theta,\mu)=(-\theta_{N+1-i},(\mu_x,-\mu_y))$ the problem is equivariant. At a
+symmetry-breaking branch point the full Moore-Spence Jacobian is singular (its null
+vector is $(v, w, 0)$ with $\mathsf K w=-\tilde{\mathcal L}'''[v,v,\cdot]$), so the
+system is posed on $x\in\mathrm{Fix}(S)$ ($\theta_i=-\theta_{N+1-i}$, $\mu_y=0$) and
+$v\in\mathrm{Fix}(-S)$ ($v_{\theta,i}=v_{\theta,N+1-i}$, $v_{\mu_x}=0$): $N+3$ unknowns
+$(\theta_{1..N/2},\mu_x,\alpha,v_{\theta,1..N/2},v_{\mu_y})$, and the equations are the
+independent halves of $F$ (in $\mathrm{Fix}(S)$) and $\mathsf Kv$ (in $\mathrm{Fix}(-S)$),
+plus $\ell^\top v_\theta=1$. This system is regular at a simple symmetry-breaking
+bifurcation (Werner & Spence 1984); `tests/test_critical.py` checks its Jacobian's
+condition number numerically.
+
+$\ell = h\odot v_0$ with $v_0$ the starting mode ($h$: segment lengths). The Jacobian is
+dense (autodiff, `jax.jacfwd`), $(2N+5)^2$ or $(N+3)^2$: fine for $N\lesssim400$.
+
+**Derivatives.** The Newton iterations run on `stop_gradient`-ed data; the result is
+then passed once more through $z^\ast \leftarrow z^\ast - J^{-1}R(z^\ast;p)$ with $J$
+frozen. At a root this changes nothing in value, and its derivative is exactly the
+implicit-function derivative $dz^\ast/dp=-J^{-1}\partial_pR$, for every float leaf $p$ of
+the scene ($\Psi_0$, $G$, $s_0$, the fixed clamp's angle for one-sided actuation, ...),
+under `jit`, `vmap`, `grad` and `jvp` (first derivatives; second derivatives through
+this step are not exact).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+from jaxtyping import Array
+
+from ..linalg import batched
+from ._continuation import AbstractParameter, Gap, SymmetricAlpha
+from ..energy.geometry import discretize
+from ..energy.lagrangian import lagrangian, positions
+from .._misc import check_int, check_number, is_concrete
+from ..results import RESULTS
+
+
+KIND_FOLD, KIND_BRANCH_POINT = 1, 2
+
+
+class CriticalPoint(eqx.Module):
+    r"""A refined critical point: `alpha` (the parameter value, rad), `theta`, `force`
+    (the critical state), `mode` ($v_\theta$, unit $L^2$ norm, sign as given), `mode_force`
+    ($v_\mu$, same scaling), `fold_height` $y(L/2)$, `kind` (1 fold, 2 branch point),
+    `residual` (max-norm of the extended system at the root), `num_steps`, `result`
+    (a [`jaxrod.RESULTS`][] code: `successful`, `max_steps_reached` or `nonfinite`)."""
+
+    alpha: Array
+    theta: Array
+    force: Array
+    mode: Array
+    mode_force: Array
+    fold_height: Array
+    kind: Array
+    residual: Array
+    num_steps: Array
+    result: RESULTS
+
+
+def _grad(scene, parameter, t, m, a):
+    sc = parameter.set(scene, a)
+    return jax.grad(lagrangian, argnums=(0, 1))(t, m, sc, discretize(sc))
+
+
+def _hvp(scene, parameter, t, m, a, vt, vm):
+    return jax.jvp(lambda tt, mm: _grad(scene, parameter, tt, mm, a), (t, m), (vt, vm))[1]
+
+
+# ----- fold: full Moore-Spence system ---------------------------------------------------
+
+def _fold_pack(t, m, a, vt, vm):
+    return jnp.concatenate([t, m, a[None], vt, vm])
+
+
+def _fold_unpack(z, N):
+    return z[:N], z[N:N + 2], z[N + 2], z[N + 3:2 * N + 3], z[2 * N + 3:]
+
+
+def _fold_residual(z, scene, parameter, ell):
+    N = ell.shape[0]
+    t, m, a, vt, vm = _fold_unpack(z, N)
+    gt, gm = _grad(scene, parameter, t, m, a)
+    kt, km = _hvp(scene, parameter, t, m, a, vt, vm)
+    return jnp.concatenate([gt, gm, kt, km, (jnp.dot(ell, vt) - 1.0)[None]])
+
+
+# ----- branch point: symmetric state, asymmetric mode -----------------------------------
+
+def _sym_unpack(y, N):
+    """y = (a (N/2), mux, alpha, c (N/2), vmuy) -> full (t, m, alpha, vt, vm)."""
+    H = N // 2
+    a, b, al, c, d = y[:H], y[H], y[H + 1], y[H + 2:2 * H + 2], y[2 * H + 2]
+    t = jnp.concatenate([a, -a[::-1]])
+    m = jnp.stack([b, jnp.zeros_like(b)])
+    vt = jnp.concatenate([c, c[::-1]])
+    vm = jnp.stack([jnp.zeros_like(d), d])
+    return t, m, al, vt, vm
+
+
+def _sym_pack(t, m, a, vt, vm):
+    H = t.shape[0] // 2
+    ts = 0.5 * (t[:H] - t[H:][::-1])
+    vs = 0.5 * (vt[:H] + vt[H:][::-1])
+    return jnp.concatenate([ts, m[:1], a[None], vs, vm[1:]])
+
+
+def _sym_residual(y, scene, parameter, ell):
+    N = ell.shape[0]
+    H = N // 2
+    t, m, a, vt, vm = _sym_unpack(y, N)
+    gt, gm = _grad(scene, parameter, t, m, a)
+    kt, km = _hvp(scene, parameter, t, m, a, vt, vm)
+    return jnp.concatenate([gt[:H], gm[:1], kt[:H], km[1:], (jnp.dot(ell, vt) - 1.0)[None]])
+
+
+# ----- Newton with an implicit-derivative final step ------------------------------------
+
+def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True):
+    """Plain Newton on res(z) = 0 with dense autodiff Jacobians. An inactive call (the
+    system `kind` does not select) takes no step: under `vmap` the loop then runs only as
+    long as the members that need it."""
+    jac = jax.jacfwd(res)
+
+    def cond(c):
+        z, k, done, _ = c
+        return (~done) & (k < max_steps) & jnp.all(jnp.isfinite(z))
+
+    def body(c):
+        z, k, _, _ = c
+        r = res(z)
+        dz = batched.solve(jac(z), -r)
+        z = z + dz
+        done = (jnp.abs(dz[idx_alpha]) < tol_alpha) & (jnp.max(jnp.abs(dz)) < 1e3 * tol_alpha)
+        return z, k + 1, done, jnp.max(jnp.abs(r))
+
+    active = jnp.asarray(active, bool)
+    z, k, done, _ = lax.while_loop(cond, body, (z0, jnp.zeros((), jnp.int32), ~active,
+                                                jnp.full((), jnp.inf, z0.dtype)))
+    return z, k, done & active
+
+
+def _implicit_step(res_p, z, jac_z):
+    """z - J^{-1} R(z; p) with J frozen: value z (at a root), derivative -J^{-1} dR/dp."""
+    return z - batched.solve(lax.stop_gradient(jac_z), res_p(z))
+
+
+def extended_jacobian(scene, cp: CriticalPoint, parameter: AbstractParameter = SymmetricAlpha()):
+    """The Jacobian of the extended system at a refined critical point (dense; for tests:
+    its smallest singular value shows regularity). Uses the system `cp.kind` selects."""
+    d = discretize(scene)
+    ell = d.h * cp.mode / jnp.sum(d.h * cp.mode**2)  # ell . mode = 1
+    if int(cp.kind) == KIND_BRANCH_POINT:
+        y = _sym_pack(cp.theta, cp.force, cp.alpha, cp.mode, cp.mode_force)
+        return jax.jacfwd(lambda y: _sym_residual(y, scene, parameter, ell))(y)
+    z = _fold_pack(cp.theta, cp.force, cp.alpha, cp.mode, cp.mode_force)
+    return jax.jacfwd(lambda z: _fold_residual(z, scene, parameter, ell))(z)
+
+
+@eqx.filter_jit
+def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: AbstractParameter = SymmetricAlpha(),
+                   max_steps: int = 20, tol: float = 1e-12) -> CriticalPoint:
+    r"""Refine a critical point of the branch of `scene` under `parameter` by Newton's
+    method on its extended system (see the module docstring).
+
+    **Arguments:** `theta`, `force`, `alpha`: a state and parameter value near the critical
+    point (e.g. the bisection result of [`jaxrod.snap_angles`][]); `mode`: the angle part
+    of the critical mode there (e.g. `jaxrod.linalg.kkt.modes` of the lowest eigenvalue);
+    `kind`: 1 fold (full Moore-Spence system), 2 symmetry-breaking branch point
+    (symmetric state, asymmetric mode; `parameter` must be `SymmetricAlpha`, or `Gap` for a
+    scene with mirror-symmetric clamps, $\alpha_L=\alpha_R$). `kind` may
+    be traced (both systems are then solved and one selected). `tol`: Newton stops when
+    the $\alpha$ update is below `tol` (rad).
+
+    **Returns:** a [`jaxrod.CriticalPoint`][]; differentiable with respect to every float
+    leaf of `scene` by the implicit function theorem.
+    """
+    if is_concrete(kind) and (np.ndim(kind) != 0 or isinstance(kind, (bool, str))
+                              or kind not in (KIND_FOLD, KIND_BRANCH_POINT)):
+        raise ValueError(f"kind must be 1 (fold) or 2 (branch point), got {kind!r}")
+    check_int("max_steps", max_steps, lo=1)
+    check_number("tol", tol, lo=0.0)
+    dtype = theta.dtype
+    N = theta.shape[0]
+    sg = lax.stop_gradient
+    scene_sg = sg(scene)
+    theta, force, alpha, mode = sg(theta), sg(force), sg(jnp.asarray(alpha, dtype)), sg(mode)
+    d = discretize(scene_sg)
+    w = d.h
+    mode = mode / jnp.sqrt(jnp.sum(w * mode**2))
+    ell = w * mode  # ell . mode = 1
+    # starting mode force: K (v, vm) ~ 0 in its mu rows -> least-squares vm from the theta rows
+    gt0 = _hvp(scene_sg, parameter, theta, force, alpha, mode, jnp.zeros(2, dtype))[0]
+    P = jax.jacfwd(lambda mm: _grad(scene_sg, parameter, theta, mm, alpha)[0])(force)  # (N, 2)
+    vm0 = -batched.lstsq2(P, gt0)
+    kind = jnp.asarray(kind)
+
+    outs = []
+    # the branch-point system needs a mirror-symmetric problem: symmetric actuation, or the
+    # gap of a scene whose clamps are symmetric (alpha_L = alpha_R, e.g. both 0)
+    symmetric = isinstance(parameter, (SymmetricAlpha, Gap))
+    outs_kinds = (KIND_FOLD, KIND_BRANCH_POINT) if symmetric else (KIND_FOLD,)
+    for which in outs_kinds:
+        if which == KIND_FOLD:
+            def res(z, sc):
+                return _fold_residual(z, sc, parameter, ell)
+            z0 = _fold_pack(theta, force, alpha, mode, vm0)
+            unpack = _fold_unpack
+            ia = N + 2
+        else:
+            def res(z, sc):
+                return _sym_residual(z, sc, parameter, ell)
+            z0 = _sym_pack(theta, force, alpha, mode, vm0)
+            unpack = _sym_unpack
+            ia = N // 2 + 1
+        active = (kind == which) | (len(outs_kinds) == 1)
+        z, k, done = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, ia, active)
+        finite = jnp.all(jnp.isfinite(z))
+        # The system not selected by `kind` (and a failed one) is singular or non-finite: its
+        # derivative step uses the start point and the identity, so that no NaN reaches the
+        # gradient of the selected one (a zero cotangent times inf is NaN).
+        z_use = jnp.where(active & finite, z, z0)
+        eye = jnp.eye(z0.shape[0], dtype=dtype)
+        J = lax.cond(active & finite, lambda zu: jax.jacfwd(lambda z: res(z, scene_sg))(zu), lambda zu: eye, z_use)
+        J = jnp.where(active & finite & jnp.all(jnp.isfinite(J)), J, eye)
+        r = jnp.max(jnp.abs(res(z, scene_sg)))
+        z_imp = _implicit_step(lambda z: res(z, scene), sg(z_use), J)
+        z = jnp.where(active & finite, z_imp, z)
+        t, m, a, vt, vm = unpack(z, N)
+        result = RESULTS.where(done & finite, RESULTS.successful,
+                               RESULTS.where(finite, RESULTS.max_steps_reached, RESULTS.nonfinite))
+        outs.append((which, (t, m, a, vt, vm, r, k), result))
+
+    if len(outs) == 1:
+        _, vals, result = outs[0]
+    else:
+        (_, v1, r1), (_, v2, r2) = outs
+        bp = kind == KIND_BRANCH_POINT
+        vals = jax.tree.map(lambda p, q: jnp.where(bp, q, p), v1, v2)
+        result = RESULTS.where(bp, r2, r1)
+    t, m, a, vt, vm, r, k = vals
+    nv = jnp.sqrt(jnp.sum(w * vt**2))
+    sc = parameter.set(scene, a)
+    fh = positions(t, m, sc)[N // 2, 1]
+    return CriticalPoint(alpha=a, theta=t, force=m, mode=vt / nv, mode_force=vm / nv, fold_height=fh,
+                         kind=kind.astype(jnp.int32), residual=r, num_steps=k, result=result)
+
+
+# ----- cusp: where a fold pair meets (two-parameter, alpha and the gap) -----------------
+
+def _set_gap(scene, g):
+    return eqx.tree_at(lambda s: s.clamps.gap, scene, g)
+
+
+def _cusp_residual(z, scene, parameter, ell):
+    N = ell.shape[0]
+    zf, g = z[:-1], z[-1]
+    sc = _set_gap(scene, g)
+    t, m, a, vt, vm = _fold_unpack(zf, N)
+    r = _fold_residual(zf, sc, parameter, ell)
+    # cubic coefficient of the fold's normal form: L'''[v, v, v]
+    d3 = jax.jvp(lambda tt, mm: _hvp(sc, parameter, tt, mm, a, vt, vm), (t, m), (vt, vm))[1]
+    c = jnp.dot(d3[0], vt) + jnp.dot(d3[1], vm)
+    return jnp.concatenate([r, c[None]])
+
+
+class CuspPoint(eqx.Module):
+    r"""A cusp of the fold curve in the (gap, alpha) plane: `gap` $G_c$, `alpha`, the critical
+    state `theta`, `force`, `mode`, `residual`, `num_steps`, `result`."""
+
+    gap: Array
+    alpha: Array
+    theta: Array
+    force: Array
+    mode: Array
+    residual: Array
+    num_steps: Array
+    result: RESULTS
+
+
+@eqx.filter_jit
+def cusp_point(scene, theta, force, alpha, mode, *, parameter: AbstractParameter = SymmetricAlpha(),
+               max_steps: int = 30, tol: float = 1e-12) -> CuspPoint:
+    r"""The cusp where a pair of folds (under `parameter`) meets as the gap varies: Newton on
+    the fold system of `critical_point` augmented by the gap $G$ as unknown and the
+    degeneracy condition $\tilde{\mathcal L}'''[v,v,v]=0$ (the quadratic coefficient of the
+    fold's normal form vanishes), $2N+6$ unknowns. Start from a fold near the cusp (`theta`,
+    `force`, `alpha`, `mode`, at the gap of `scene`). Differentiable (implicit function
+    theorem, as `critical_point`) with respect to the float leaves of `scene` other than the
+    gap, e.g. $dG_c/d\Psi_0$."""
+    check_int("max_steps", max_steps, lo=1)
+    check_number("tol", tol, lo=0.0)
+    dtype = theta.dtype
+    N = theta.shape[0]
+    sg = lax.stop_gradient
+    scene_sg = sg(scene)
+    theta, force, alpha, mode = sg(theta), sg(force), sg(jnp.asarray(alpha, dtype)), sg(mode)
+    w = discretize(scene_sg).h
+    mode = mode / jnp.sqrt(jnp.sum(w * mode**2))
+    ell = w * mode
+    gt0 = _hvp(scene_sg, parameter, theta, force, alpha, mode, jnp.zeros(2, dtype))[0]
+    P = jax.jacfwd(lambda mm: _grad(scene_sg, parameter, theta, mm, alpha)[0])(force)
+    vm0 = -batched.lstsq2(P, gt0)
+    z0 = jnp.concatenate([_fold_pack(theta, force, alpha, mode, vm0), jnp.asarray(scene_sg.clamps.gap, dtype)[None]])
+
+    def res(z, sc):
+        return _cusp_residual(z, sc, parameter, ell)
+
+    z, k, done = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, 2 * N + 5)
+    finite = jnp.all(jnp.isfinite(z))
+    z_use = jnp.where(finite, z, z0)
+    J = jax.jacfwd(lambda z: res(z, scene_sg))(z_use)
+    J = jnp.where(finite & jnp.all(jnp.isfinite(J)), J, jnp.eye(J.shape[0], dtype=dtype))
+    r = jnp.max(jnp.abs(res(z, scene_sg)))
+    z = jnp.where(finite, _implicit_step(lambda z: res(z, scene), sg(z_use), J), z)
+    t, m, a, vt, vm = _fold_unpack(z[:-1], N)
+    result = RESULTS.where(done & finite, RESULTS.successful,
+                           RESULTS.where(finite, RESULTS.max_steps_reached, RESULTS.nonfinite))
+    return CuspPoint(gap=z[-1], alpha=a, theta=t, force=m, mode=vt / jnp.sqrt(jnp.sum(w * vt**2)),
+                     residual=r, num_steps=k, result=result)

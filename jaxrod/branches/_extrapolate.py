@@ -1,0 +1,125 @@
+r"""Snap angles extrapolated to the continuum: Richardson extrapolation on two meshes.
+
+The discrete rod is second-order accurate: at a fixed mesh family (uniform, or the same
+grading), $\alpha_c(N)=\alpha_c^\ast+c\,N^{-2}+O(N^{-4})$; the measured order is 2.00 at
+every point of `benchmarks/results/convergence_alpha_c.md`. At the default $N=100$ the
+mesh error is up to 0.17 deg ($s_0=0.02$). From $N$ and $2N$,
+
+$$\alpha_R=\alpha_{2N}+\frac{\alpha_{2N}-\alpha_N}{2^2-1},\qquad
+\varepsilon=\frac{|\alpha_{2N}-\alpha_N|}{3},$$
+
+$\varepsilon$ estimating the error of $\alpha_{2N}$ (that of $\alpha_R$ is of higher order:
+about $10^{-3}$ deg at $N=100$, see `tests/test_extrapolate.py`). The same combination is
+applied to the fold heights before and after the snap. Where the two meshes disagree
+(one snaps and the other does not, or the kind differs: near a termination gap or where
+a fold and a branch point cross), nothing is extrapolated: the fine-mesh values are
+returned with `consistent=False` and the error estimate $|\alpha_{2N}-\alpha_N|$ (NaN
+where one mesh does not snap).
+
+Everything is differentiable like [`jaxrod.snap_angles`][] (a fixed linear combination).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array
+
+from ..model import Mesh, Scene
+from ._snap import SnapAngles, SnapPath, snap_angles
+from ..results import RESULTS
+
+
+ORDER = 2
+
+
+class ExtrapolatedPath(eqx.Module):
+    """One path (`up` or `down`) extrapolated from two meshes.
+
+    `snaps`, `kind` (of the fine mesh), `alpha_c` (rad; NaN if it does not snap),
+    `error` (rad, estimated error: of the fine mesh's value, an upper bound for
+    `alpha_c`'s own where `consistent`), `alpha_c_coarse`, `alpha_c_fine`,
+    `fold_height_before`, `fold_height_after` (extrapolated likewise), `consistent`;
+    `result` the verdict on both meshes (the fine mesh's path code if it is not successful,
+    else the coarse mesh's, else `mesh_inconsistent` where the meshes disagree, else
+    `successful`), `start_result` likewise for the start states, and every code of each mesh:
+    `result_coarse`, `result_fine`, `start_result_coarse`, `start_result_fine`,
+    `refine_result_coarse`, `refine_result_fine` (None without the refinement)."""
+
+    snaps: Array
+    kind: Array
+    alpha_c: Array
+    error: Array
+    alpha_c_coarse: Array
+    alpha_c_fine: Array
+    fold_height_before: Array
+    fold_height_after: Array
+    consistent: Array
+    result: RESULTS
+    start_result: RESULTS
+    result_coarse: RESULTS
+    result_fine: RESULTS
+    start_result_coarse: RESULTS
+    start_result_fine: RESULTS
+    refine_result_coarse: RESULTS | None = None
+    refine_result_fine: RESULTS | None = None
+
+
+class ExtrapolatedSnapAngles(eqx.Module):
+    """`up`, `down`: [`jaxrod.ExtrapolatedPath`][]s; `coarse` and `fine` the two
+    [`jaxrod.SnapAngles`][] (at `n_coarse` and `n_fine` segments)."""
+
+    up: ExtrapolatedPath
+    down: ExtrapolatedPath
+    coarse: SnapAngles
+    fine: SnapAngles
+    n_coarse: int = eqx.field(static=True)
+    n_fine: int = eqx.field(static=True)
+
+
+def refined_scene(scene: Scene, factor: int = 2) -> Scene:
+    """The same scene on a mesh `factor` times finer (same grading)."""
+    m = scene.mesh
+    return Scene(scene.strip, scene.clamps, Mesh(factor * m.n, m.refine, m.width), scene.stretching, scene.gravity)
+
+
+def _combine(c: SnapPath, f: SnapPath) -> ExtrapolatedPath:
+    r = 2.0**ORDER - 1.0
+    consistent = (c.snaps == f.snaps) & (c.kind == f.kind)
+    both = consistent & f.snaps
+
+    def ex(a, b):
+        return jnp.where(both, b + (b - a) / r, b)
+
+    err = jnp.where(both, jnp.abs(f.alpha_c - c.alpha_c) / r,
+                    jnp.where(c.snaps & f.snaps, jnp.abs(f.alpha_c - c.alpha_c), jnp.nan))
+    err = jnp.where(~c.snaps & ~f.snaps, 0.0, err)
+    ok = RESULTS.successful
+
+    def worst(cr, fr):
+        return RESULTS.where(fr != ok, fr, cr)
+
+    result = worst(c.result, f.result)
+    result = RESULTS.where((result == ok) & ~consistent, RESULTS.mesh_inconsistent, result)
+    return ExtrapolatedPath(
+        snaps=f.snaps, kind=f.kind, alpha_c=ex(c.alpha_c, f.alpha_c), error=err,
+        alpha_c_coarse=c.alpha_c, alpha_c_fine=f.alpha_c,
+        fold_height_before=ex(c.fold_height_before, f.fold_height_before),
+        fold_height_after=ex(c.fold_height_after, f.fold_height_after),
+        consistent=consistent,
+        result=result, start_result=worst(c.start_result, f.start_result),
+        result_coarse=c.result, result_fine=f.result,
+        start_result_coarse=c.start_result, start_result_fine=f.start_result,
+        refine_result_coarse=c.refine_result, refine_result_fine=f.refine_result,
+    )
+
+
+def snap_angles_extrapolated(scene: Scene, **kwargs) -> ExtrapolatedSnapAngles:
+    r"""[`jaxrod.snap_angles`][] on the scene's mesh ($N$) and on one twice as fine, and
+    their Richardson extrapolation (module docstring). `kwargs` go to `snap_angles`.
+    Costs one `snap_angles` at $N$ plus one at $2N$ (two compilations on first use)."""
+    coarse = snap_angles(scene, **kwargs)
+    fine_scene = refined_scene(scene)
+    fine = snap_angles(fine_scene, **kwargs)
+    return ExtrapolatedSnapAngles(up=_combine(coarse.up, fine.up), down=_combine(coarse.down, fine.down),
+                                  coarse=coarse, fine=fine, n_coarse=scene.mesh.n, n_fine=fine_scene.mesh.n)

@@ -1,0 +1,298 @@
+r"""Phase diagram of the snap angles (paper Fig. 2c): $\alpha_{c,\rm up}$ and
+$\alpha_{c,\rm down}$ of [`jaxrod.snap_angles`][] over a grid of fold angles $\Psi_0$ and
+gaps $G/L$ (symmetric actuation, $\alpha_L=\alpha_R=\alpha$, conventions of MODEL.md).
+
+One chunk per $\Psi_0$: a single jitted call that runs through the gaps in order
+(`lax.scan`). The start states of each gap (up and down at $\alpha=0$) come from Newton
+started at the previous gap's states, accepted when the result is the same state
+(converged, stable, fold height of the same sign, no angle changed by $\pi/2$ or more);
+otherwise (the first gap, a state that stops existing) from the homotopy of
+[`jaxrod.initial_state`][], as `snap_angles` builds them. `warm_starts` (0, 1 or 2) records
+which. Then `snap_angles` runs from those states without its extended-system polish and
+without following the landed branch after a snap (`continue_after_snap=False`):
+$\alpha_c$ is the bisection value, within ~1e-8 rad of the polished one. Homotopy (51 ms
+of 93 ms per scene at N = 100) and polish (31 ms) were the cost; on the 5 x 41 grid at
+N = 100 this takes ~3 s instead of ~16 s, with the same kinds, start codes and landing
+states at all 205 points and $|\Delta\alpha_c|\le6\times10^{-7}$ deg (measured against
+single polished `snap_angles` calls; `tests/test_phase_diagram.py` checks a small grid).
+$\Psi_0$ and the gaps are traced, so every chunk reuses one compilation (per mesh and grid
+length). Each gap keeps its own result code: a gap where a state does not exist gives
+NaN angles there and does not affect the others.
+
+**One vmapped call** (`batch="vmap"`, the default on a GPU): every $\Psi_0$ chunk of the
+grid in a single jitted call, `vmap` over $\Psi_0$ of the same scan over the gaps (same
+warm starts, same per-gap result codes). Batched, each loop runs as long as its slowest
+member and does every member's work, and an `lax.cond` on a batched predicate would run
+both branches. So the warm-start Newton, the Newton's inertia-correction ladder and the
+later stages of a snap path are loops of at most one pass (`jaxrod._misc.run_if`), which
+under `vmap` run only when some member needs them, with their inputs passed through an
+optimization barrier (without it XLA hoisted the work out of the loop and ran it every
+time); the homotopy fallback, which at a given gap one member of the grid needs (the one
+whose state stopped existing), runs member by member through real conds
+(`jaxrod._misc.run_if_each`). On XLA:CPU the batched linear algebra goes through
+`jaxrod.linalg.batched` (batched LAPACK calls inside the loops had deadlocked 2-core machines).
+Measured on 2 CPU cores (`benchmarks/bench_phase.py`, both side by side, 5 x 41 at
+N = 100): the vmapped call 5.39 s, the sequential chunks 4.45 s (it was 21.8 s vs 4.77 s
+before those changes, the homotopy running for all members at every gap), so
+`batch="auto"` still picks `"scan"` (one call per $\Psi_0$) on the CPU and `"vmap"`
+elsewhere.
+
+With `out`, each finished chunk is written to `out/chunks/psi0_<deg>.nc` (NetCDF3 via
+scipy) and the run is resumable: a chunk whose file exists with the same grid, $s_0$
+and mesh is read back, not recomputed. The assembled `xarray.Dataset` goes to
+`out/phase_diagram.nc`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jax import lax
+
+from ._continuation import Continuation, SymmetricAlpha
+from ..statics import float_scene, solve_equilibrium
+from ..statics import initial_state_signed, still_tracked
+from .._misc import check_param, run_if as _run_if, run_if_each
+from ..model import Clamps, Mesh, Scene, Strip
+from ._snap import _snap_angles_from
+from ..results import RESULTS
+
+VARIABLES = ("alpha_c_up", "alpha_c_down", "kind_up", "kind_down", "fold_height_before_up",
+             "fold_height_after_up", "fold_height_before_down", "fold_height_after_down",
+             "start_up", "start_down", "result_up", "result_down", "warm_starts")
+
+
+def _warm_or_homotopy(scene, sgn, t_prev, m_prev, ok_prev):
+    """The up (`sgn` = +1) or down (-1) state of `scene` at alpha = 0: Newton from the
+    neighbouring gap's state when that exists and the result is the same state (converged,
+    stable, fold height of the right sign, no angle changed by pi/2 or more), else the
+    homotopy of `jaxrod.initial_state` (a real branch: the chunk is not vmapped).
+    Returns the equilibrium and whether the warm start was used."""
+    is_sds = lambda x: isinstance(x, jax.ShapeDtypeStruct)  # noqa: E731
+    shapes = eqx.filter_eval_shape(initial_state_signed, scene, sgn)
+    static = eqx.filter(shapes, is_sds, inverse=True)
+    shapes = eqx.filter(shapes, is_sds)
+    arrays = lambda e: eqx.filter(e, eqx.is_array)  # noqa: E731
+    zeros = lambda: jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)  # noqa: E731
+
+    def warm(scene, sgn, t_prev, m_prev):
+        eq = solve_equilibrium(scene, t_prev, m_prev)
+        return still_tracked(eq, sgn, t_prev, scene), jax.tree.map(lambda x, s: jnp.asarray(x, s.dtype), arrays(eq), shapes)
+
+    # (everything the two branches use goes in as `run_if` operands: see its docstring)
+    good, eq_w = _run_if(ok_prev, warm, (jnp.zeros((), bool), zeros()), (scene, sgn, t_prev, m_prev))
+    # the homotopy (~35 ms a state at N = 100) one member after another under `vmap`: at most
+    # a few members of the vmapped grid need it at a gap (the one whose state stopped existing)
+    eq = run_if_each(~good, lambda sc, sg: arrays(initial_state_signed(sc, sg)), eq_w, (scene, sgn))
+    return eqx.combine(eq, static), good
+
+
+@eqx.filter_jit
+def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation()):
+    """All gaps at one fold angle (rad), one gap after the other (`lax.scan`): the start
+    states of each gap by Newton from the previous gap's (homotopy where that fails), then
+    `snap_angles` from them without the extended-system polish (bisection values) and
+    without following the landed branch. `keep_branch` (static) also returns each path's
+    walked branch (`branch_up`, `branch_down`: the first continuation stage, a `Branch`
+    per gap) for the tests that check the walks themselves."""
+    par = SymmetricAlpha()
+    dtype = psi0.dtype
+    N = mesh.n
+
+    def one(carry, g):
+        t_prev, m_prev, ok_prev = carry
+        scene = par.set(float_scene(Scene(Strip(psi0=psi0, s0=s0), Clamps(g), mesh)), 0.0)
+        # both start states through one traced body (`lax.map` over the side): one compiled
+        # copy of the warm Newton and of the homotopy instead of two (XLA compile at -O0 25 s -> 20 s)
+        is_sds = lambda x: isinstance(x, jax.ShapeDtypeStruct)  # noqa: E731
+        static = eqx.filter(eqx.filter_eval_shape(initial_state_signed, scene, jnp.ones((), dtype)), is_sds, inverse=True)
+
+        def start(args):
+            eq, good = _warm_or_homotopy(scene, *args)
+            return eqx.filter(eq, eqx.is_array), good
+
+        eqs, warmed = lax.map(start, (jnp.asarray([1.0, -1.0], dtype), t_prev, m_prev, ok_prev))
+        starts = eqx.combine(eqs, static)
+        r = _snap_angles_from(scene, starts, settings, jnp.pi, 24, False, continue_after_snap=False)
+        out = {}
+        for name, p in (("up", r.up), ("down", r.down)):
+            out[f"alpha_c_{name}"] = jnp.degrees(p.alpha_c)
+            out[f"kind_{name}"] = p.kind.astype(jnp.int32)
+            out[f"fold_height_before_{name}"] = p.fold_height_before
+            out[f"fold_height_after_{name}"] = p.fold_height_after
+            out[f"start_{name}"] = p.start_result._value.astype(jnp.int32)
+            out[f"result_{name}"] = p.result._value.astype(jnp.int32)
+        out["warm_starts"] = warmed.astype(jnp.int32).sum()
+        if keep_branch:
+            for name, p in (("up", r.up), ("down", r.down)):
+                out[f"branch_{name}"] = jax.tree.map(lambda x: x[0], p.branch)
+        return (starts.theta, starts.force, starts.result == RESULTS.successful), out
+
+    init = (jnp.zeros((2, N), dtype), jnp.zeros((2, 2), dtype), jnp.zeros((2,), bool))
+    return lax.scan(one, init, gaps)[1]
+
+
+@eqx.filter_jit
+def _grid(psis, gaps, s0, mesh, settings=Continuation()):
+    """All chunks in one call: `vmap` over the fold angles (rad) of `_chunk`."""
+    return jax.vmap(lambda p: _chunk(p, gaps, s0, mesh, settings=settings))(psis)
+
+
+def _resolve_batch(batch):
+    if batch not in ("auto", "scan", "vmap"):
+        raise ValueError(f"batch must be 'auto', 'scan' or 'vmap', got {batch!r}")
+    if batch == "auto":
+        return "scan" if jax.default_backend() == "cpu" else "vmap"
+    return batch
+
+
+def _attrs(gaps, s0, n, refine):
+    # `chunk_variables` (not `variables`: scipy's netcdf_file has an attribute of that name):
+    # a chunk written by a version with other variables is recomputed
+    return {"gaps_hash": ",".join(f"{g:.12g}" for g in gaps), "s0": float(s0), "n": int(n),
+            "refine": float(refine), "chunk_variables": ",".join(VARIABLES)}
+
+
+def _chunk_dataset(psi0_deg, gaps, values, attrs):
+    import xarray as xr
+
+    data = {}
+    for k in VARIABLES:
+        v = np.asarray(values[k])
+        data[k] = (("gap",), v.astype(np.int32) if v.dtype.kind in "iub" else v.astype(np.float64))
+    ds = xr.Dataset(data, coords={"gap": np.asarray(gaps, float)}, attrs=attrs)
+    return ds.expand_dims(psi0=[float(psi0_deg)])
+
+
+def _chunk_path(out, psi0_deg):
+    # 12 significant digits (the CLI rounds its ranges to 12): two fold angles that differ
+    # in the 7th digit get two files instead of overwriting each other's chunk on every run
+    return os.path.join(out, "chunks", f"psi0_{psi0_deg:.12g}.nc")
+
+
+def _read_chunk(path, attrs, psi0_deg, gaps):
+    """The finished chunk at `path` if it holds exactly this fold angle, these gaps and
+    settings (`attrs`: mesh, s0, grid, variables), every variable of shape (1, gaps); else
+    None, and the chunk is recomputed (a missing, truncated or foreign file alike)."""
+    import xarray as xr
+
+    if not os.path.exists(path):
+        return None
+    try:
+        with xr.open_dataset(path, engine="scipy") as ds:
+            ds = ds.load()
+    except Exception:  # a truncated file from an interrupted write: recompute it
+        return None
+    try:
+        if any(ds.attrs.get(k) != v for k, v in attrs.items()):
+            return None
+        if (ds["psi0"].values.tolist() != [float(psi0_deg)]
+                or ds["gap"].values.tolist() != [float(g) for g in gaps]):
+            return None
+        if any(ds[k].dims != ("psi0", "gap") or ds[k].shape != (1, len(gaps)) for k in VARIABLES):
+            return None
+    except (KeyError, ValueError, TypeError):
+        return None
+    return ds
+
+
+def _write(ds, path):
+    tmp = path + ".part"
+    ds.to_netcdf(tmp, engine="scipy", format="NETCDF3_64BIT")
+    os.replace(tmp, path)  # atomic: an interrupted write never leaves a half chunk
+
+
+def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progress=True, on_chunk=None,
+                  batch="auto"):
+    r"""Critical clamp angles over the grid `psi0_deg` x `gaps` (an `xarray.Dataset`).
+
+    **Arguments:** `psi0_deg` fold angles in (0, 180] (degrees), `gaps` values of $G/L$ in
+    (0, 1), `s0`, `n`, `refine` as in [`jaxrod.make_scene`][]; `out` a directory for the
+    resumable chunk files and `phase_diagram.nc`; `progress` a tqdm bar;
+    `on_chunk(psi0_deg, computed: bool)` called after each chunk; `batch` `"scan"` (one
+    compiled call per $\Psi_0$), `"vmap"` (every $\Psi_0$ still to compute in one vmapped
+    call) or `"auto"` (`"scan"` on the CPU, where it measured faster, else `"vmap"`). Both
+    give the same numbers.
+
+    **Returns:** dataset with dims `(psi0, gap)`: `alpha_c_up`, `alpha_c_down` (degrees,
+    NaN where the path does not snap), `kind_up`/`kind_down` (0 none, 1 fold, 2 branch
+    point), fold heights before/after each snap, `start_up`/`start_down` (RESULTS codes of
+    the start states), `result_up`/`result_down` (RESULTS codes of the whole paths, as
+    `SnapPath.result`: not successful where NaN angles do not mean "does not snap"), `warm_starts` (how many of the two start states came from the
+    previous gap, see the module docstring); attribute `computed_chunks` lists the $\Psi_0$ computed by this call
+    (the others were read back from `out`), `batch` the mode used. Needs float64.
+    """
+    import xarray as xr
+
+    psis = [float(p) for p in np.atleast_1d(psi0_deg)]
+    gaps = [float(g) for g in np.atleast_1d(gaps)]
+    if not psis or not gaps:
+        raise ValueError("psi0 and gaps must each hold at least one value")
+    for p in psis:
+        check_param("psi0", p, lo=0.0, hi=180.0, hi_open=False, unit=" deg")
+    for g in gaps:
+        check_param("gap", g, lo=0.0, hi=1.0)
+    check_param("s0", s0, lo=0.0)
+    mesh = Mesh(n, refine)
+    if not jax.config.jax_enable_x64:
+        raise ValueError("phase_diagram needs float64; enable it with jax.config.update('jax_enable_x64', True)")
+    attrs = _attrs(gaps, s0, n, refine)
+    if out is not None:
+        os.makedirs(os.path.join(out, "chunks"), exist_ok=True)
+    g_arr = jnp.asarray(gaps, jnp.float64)
+    s0_arr = jnp.asarray(float(s0), jnp.float64)
+    batch = _resolve_batch(batch)
+    cached = {p: (_read_chunk(_chunk_path(out, p), attrs, p, gaps) if out is not None else None) for p in psis}
+    todo = [p for p in psis if cached[p] is None]
+    batched = {}
+    if batch == "vmap" and todo:
+        # one call for every chunk still missing (the finished ones were read back above)
+        vals = jax.device_get(_grid(jnp.asarray([math.radians(p) for p in todo], jnp.float64), g_arr, s0_arr, mesh))
+        batched = {p: {k: v[i] for k, v in vals.items()} for i, p in enumerate(todo)}
+    chunks, computed = [], []
+    it = psis
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(psis, desc="phase diagram", unit="Psi0")
+    for p in it:
+        ds = cached[p]
+        if ds is None:
+            vals = batched.get(p)
+            if vals is None:
+                vals = jax.device_get(_chunk(jnp.asarray(math.radians(p), jnp.float64), g_arr, s0_arr, mesh))
+            ds = _chunk_dataset(p, gaps, vals, attrs)
+            if out is not None:
+                _write(ds, _chunk_path(out, p))
+            computed.append(p)
+        chunks.append(ds)
+        if on_chunk is not None:
+            on_chunk(p, p in computed)
+    full = xr.concat(chunks, dim="psi0")
+    full.attrs = dict(attrs, units="alpha in degrees, G/L and fold heights in units of L",
+                      kinds="0 none, 1 fold, 2 branch_point")
+    full["alpha_c_up"].attrs["long_name"] = "snap-up critical clamp angle (deg)"
+    full["alpha_c_down"].attrs["long_name"] = "snap-down critical clamp angle (deg)"
+    if out is not None:
+        _write(full, os.path.join(out, "phase_diagram.nc"))
+    full.attrs["computed_chunks"] = computed
+    full.attrs["batch"] = batch
+    return full
+
+
+def termination_gaps(psi0_deg, *, s0=0.02, n=100):
+    """`{psi0: (G*_up, G*_down)}` from `termination_gap` for each Psi0 (deg): the vertical
+    lines of the phase-diagram figure."""
+    from ._termination import termination_gap
+
+    out = {}
+    for p in np.atleast_1d(psi0_deg):
+        t = termination_gap(float(p), s0=s0, n=n)
+        out[float(p)] = (float(t.gap_up), float(t.gap_down))
+    return out

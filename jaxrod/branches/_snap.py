@@ -1,0 +1,380 @@
+r"""Snap angles: where the quasi-statically actuated strip loses stability, and of what kind.
+
+Snap up: start in the down state at $\alpha=0$, increase $\alpha$ along the branch
+(pseudo-arclength continuation) until the unstable count $\nu$ of the constrained Hessian
+changes. Snap down: start in the up state, decrease $\alpha$. When the down state does
+not exist at $\alpha=0$ (tight folds at large gaps), the snap-up path starts from the
+state the snap-down path reached at its most negative angle, i.e. the other half of the
+quasi-static hysteresis protocol, and says so (`start_result` is `start_substituted`).
+A loss of stability at a fold is a snap however small the jump; at a branch point a
+landing close by means a supercritical branch is followed (see `follow_path`). The critical
+and landed states are checked for self-intersection (`jaxrod.self_intersects`).
+
+The critical point between the last stable and the first unstable point is refined by
+bisection on the arclength along the stable point's tangent (each trial is a corrector
+solve plus one Sturm count), to $\Delta s\sim 2^{-24}$ of the step ($\lesssim 10^{-8}$ in $\alpha$),
+then polished by Newton on the extended system (`jaxrod.critical_point`), which is accepted
+only within $10^{-6}$ rad of the bisection point, so $\alpha_c$ is exact to round-off at the given
+mesh. (48 bisections gave the same $\alpha_c$ to 1e-10 deg at 3x the cost; 16 left the
+bisection point up to 3e-6 rad away, outside the acceptance.) Its kind: under symmetric actuation, a *branch point* if
+the mode that goes unstable is mirror-asymmetric, a *fold* (limit point in $\alpha$) if it
+is symmetric; under one-sided actuation, a fold.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax import lax
+from jaxtyping import Array
+
+from ..linalg import kkt
+from ._continuation import (Continuation, SymmetricAlpha, _pieces, _tangent, continue_branch, require_float64, corrector)
+from ..energy.contact import self_intersects
+from ._critical import critical_point
+from ..energy.geometry import discretize
+from ..energy.lagrangian import positions
+from ..statics import Newton, float_scene, solve_unflagged
+from ..statics import initial_state_signed
+from .._misc import check_bool, check_int, check_number, run_if
+from ..results import RESULTS
+from ..statics import Equilibrium
+from ..statics import mode_parity
+
+
+KIND_NONE, KIND_FOLD, KIND_BRANCH_POINT = 0, 1, 2
+KIND_NAMES = {KIND_NONE: "none", KIND_FOLD: "fold", KIND_BRANCH_POINT: "branch_point"}
+
+
+class SnapPath(eqx.Module):
+    """One direction of the hysteresis loop.
+
+    `snaps` (bool), `alpha_c` (rad; NaN if it does not snap), `kind` (0 none, 1 fold,
+    2 branch point), `theta_before`/`force_before` the critical state,
+    `fold_height_before`, `theta_after`/`fold_height_after` the state it lands in,
+    `branch` the continuation stages (leading axis: stage; a supercritical branch point
+    is followed by a second stage on the asymmetric branch, a snap by one on the landed
+    branch unless `continue_after_snap=False`), `result` and `start_result` (below),
+    `stop` (the deciding `Branch.stop`), `refine_result` (the RESULTS code of the extended-system refinement of the
+    critical point, `jaxrod.critical_point`; where it fails the bisection values are kept),
+    `mode` the critical mode (angle part, unit $L^2$ norm), `jump` the $L^2$ distance of the
+    landed angle field from the critical one (rad; NaN if it does not snap).
+
+    `result` is the whole path's code: `successful`, or the start state's code where it does
+    not exist, `continuation_incomplete`, `landing_failed`, `self_intersecting` (the
+    critical or the landed state passes through itself), `derivative_unavailable` (the
+    refinement failed: `alpha_c` is the bisection value). `start_result` is
+    `start_substituted` where the path started from the other path's end (see the module
+    docstring).
+
+    `alpha_c`, `theta_before`, `force_before` and `fold_height_before` are differentiable
+    with respect to the float leaves of the scene (implicit differentiation of the
+    extended system; the discrete search itself carries no gradient)."""
+
+    snaps: Array
+    alpha_c: Array
+    kind: Array
+    theta_before: Array
+    force_before: Array
+    fold_height_before: Array
+    theta_after: Array
+    force_after: Array
+    fold_height_after: Array
+    branch: object
+    result: RESULTS
+    start_result: RESULTS
+    stop: Array
+    jump: Array | None = None
+    refine_result: RESULTS | None = None
+    mode: Array | None = None
+
+
+def _fh(scene, parameter, t, m, lam):
+    sc = parameter.set(scene, lam)
+    return positions(t, m, sc)[sc.mesh.n // 2, 1]
+
+
+def _refine(scene, parameter, branch, settings, tol, bisections):
+    """Bisection on arclength between the last stable and the first unstable point."""
+    F, F_lam, Kf = _pieces(scene, parameter)
+    w = discretize(scene).h
+    i = branch.count - 1
+    ta, ma, la = branch.theta[i - 1], branch.force[i - 1], branch.lam[i - 1]
+    tb, lb = branch.theta[i], branch.lam[i]
+    nu_a = branch.num_unstable[i - 1]
+    Ka = Kf(ta, ma, la)
+    # tangent at a, oriented along the secant a -> b
+    zt, zm = kkt.solve(Ka, -F_lam(ta, ma, la)[0], -F_lam(ta, ma, la)[1])
+    nrm = jnp.sqrt(jnp.sum(w * zt**2) + 1.0)
+    tau = (zt / nrm, zm / nrm, 1.0 / nrm)
+    sgn = jnp.sign(jnp.sum(w * tau[0] * (tb - ta)) + tau[2] * (lb - la))
+    sgn = jnp.where(sgn == 0, 1.0, sgn)
+    tau = jax.tree.map(lambda v: sgn * v, tau)
+    ds_b = branch.ds[i]
+
+    def body(_, c):
+        lo, hi, best = c
+        s = 0.5 * (lo + hi)
+        t, m, lam, conv, _ = corrector(scene, parameter, (ta, ma), la, tau, s, settings.corrector_steps, tol)
+        nu = kkt.count_below(Kf(t, m, lam), jnp.zeros(1, t.dtype))[0]
+        stable_side = conv & (nu == nu_a)
+        lo = jnp.where(stable_side, s, lo)
+        hi = jnp.where(stable_side, hi, s)
+        best = jax.tree.map(lambda new, old: jnp.where(stable_side, new, old), (t, m, lam), best)
+        return lo, hi, best
+
+    lo, hi, (t, m, lam) = lax.fori_loop(0, bisections, body, (jnp.zeros_like(ds_b), ds_b, (ta, ma, la)))
+    # state just past the critical point: its lowest mode tells the kind
+    t2, m2, l2, _, _ = corrector(scene, parameter, (ta, ma), la, tau, hi, settings.corrector_steps, tol)
+    K2 = Kf(t2, m2, l2)
+    lam_min = kkt.smallest_eigenvalues(K2, 1)
+    v = kkt.modes(K2, lam_min)[:, 0]
+    tl_c = _tangent(Kf(t, m, lam), F_lam(t, m, lam), w * tau[0], tau[2], w)[2]
+    return t, m, lam, v, tl_c
+
+
+def _land(scene, parameter, t, m, lam, v, direction, up_expected, solver):
+    """Push the critical state along the unstable mode slightly past alpha_c and relax."""
+    sc = parameter.set(scene, lam + direction * 1e-3)
+    eps = 0.05
+    plus = _fh(scene, parameter, t + eps * v, m, lam)
+    minus = _fh(scene, parameter, t - eps * v, m, lam)
+    pick = jnp.where((plus > minus) == up_expected, 1.0, -1.0)
+    eq = solve_unflagged(sc, t + pick * eps * v, m, Newton(max_steps=200))
+    return eq.theta, eq.force, _fh(scene, parameter, eq.theta, eq.force, lam + direction * 1e-3), eq
+
+
+JUMP_DISTANCE = 0.1  # rad, L2 distance of the angle field; see `follow_path`
+
+
+def _is_mirror_symmetric(theta, tol=1e-6):
+    return jnp.max(jnp.abs(theta + theta[::-1])) < tol
+
+
+def _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bisections, tol):
+    """Continue from (t0, m0) at parameter lam0 until stability changes; refine; land."""
+    sc = parameter.set(scene, lam0)
+    start = Equilibrium(t0, m0, RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), sc)
+    branch = continue_branch(sc, start, parameter, direction=direction,
+                             bounds=(-bound, bound), settings=settings, stop_on_instability=True)
+    snaps = (branch.stop == 2) & ok0
+    t, m, lam, v, _ = _refine(scene, parameter, branch, settings, tol, bisections)
+    if isinstance(parameter, SymmetricAlpha):
+        asym = (mode_parity(v[:, None])[0] < 0) & _is_mirror_symmetric(t)
+        kind = jnp.where(asym, KIND_BRANCH_POINT, KIND_FOLD)
+    else:
+        kind = jnp.full((), KIND_FOLD)
+    kind = jnp.where(snaps, kind, KIND_NONE).astype(jnp.int32)
+    ta, ma, fa, eq_after = _land(scene, parameter, t, m, lam, v, direction, direction > 0, Newton())
+    fb = _fh(scene, parameter, t, m, lam)
+    return branch, snaps, kind, t, m, lam, fb, ta, ma, fa, eq_after.converged
+
+
+def follow_path(scene, start_eq, direction, parameter, settings, bound, bisections, tol, stages=2,
+          continue_after_snap=True, substituted=False):
+    """One direction of the loop. After a loss of stability the critical state is pushed
+    along the unstable mode 1e-3 rad past alpha_c and relaxed. At a fold the strip snaps
+    there, however small the jump (past a fold the branch has no equilibrium nearby: the
+    landed state is another one). At a branch point it snaps if it lands more than
+    `JUMP_DISTANCE` away (L2 norm of the angle field; to the other state, or to a distant
+    asymmetric one); if it lands close by, the instability was supercritical (a stable
+    asymmetric branch grows continuously out of the branch point, amplitude
+    ~ sqrt(1e-3) ~ 0.03): no snap yet, and the path continues from that state, up to
+    `stages` times. `substituted` (traced bool): the start is the other path's end."""
+    def body(c, _):
+        t0, m0, lam0, ok, done, out = c
+        def run(sc, d, args):
+            t0, m0, lam0, ok0 = args
+            return _stage(sc, parameter, t0, m0, lam0, ok0, d, settings, bound, bisections, tol)
+
+        args = (t0, m0, lam0, ok & ~done)
+        if continue_after_snap:
+            # after a snap the next stage follows the landed branch (to |alpha| = bound or its
+            # own loss of stability): the post-snap branch of the hysteresis figures
+            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = run(scene, direction, args)
+        else:
+            # skip the later stages of a path that has been decided: `run_if`, a loop of at most
+            # one pass, not `lax.cond`, which under `vmap` (a batched `done`) would run the whole
+            # stage for every member at every stage (2x the continuation work of a phase diagram)
+            shapes = jax.eval_shape(lambda a: run(scene, direction, a), args)
+            skipped = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = run_if(~done, run, skipped, (scene, direction, args))
+        w = discretize(scene).h
+        dist = jnp.sqrt(jnp.sum(w * (ta - t) ** 2))
+        jumped = snaps & ((dist > JUMP_DISTANCE) | (kind == KIND_FOLD)) & landed
+        # the path is decided here if it did not lose stability (bound reached, start
+        # missing, or the continuation gave up: `stop` tells which), if it jumped, or if it
+        # lost stability but the relaxation past alpha_c found no equilibrium (`landed`
+        # False: a loss of stability all the same, whose landing is unknown)
+        final = ~done & (~snaps | jumped | ~landed)
+        new_out = (snaps, kind, t, m, lam, fb, ta, ma, fa, br.stop, landed, dist)
+        out = jax.tree.map(lambda n, o: jnp.where(final, n, o), new_out, out)
+        lam_next = lam + direction * 1e-3
+        nxt = (ta, ma, lam_next, ok & snaps & landed, done | final, out)
+        return nxt, br
+
+    dtype = start_eq.theta.dtype
+    nan = jnp.full((), jnp.nan, dtype)
+    out0 = (jnp.zeros((), bool), jnp.zeros((), jnp.int32), start_eq.theta, start_eq.force, nan, nan,
+            start_eq.theta, start_eq.force, nan, jnp.full((), -1, jnp.int32), jnp.ones((), bool), nan)
+    lam0 = parameter.get(start_eq.scene)
+    ok0 = start_eq.result == RESULTS.successful
+    init = (start_eq.theta, start_eq.force, jnp.asarray(lam0, dtype), ok0, jnp.zeros((), bool), out0)
+    (_, _, _, _, done, out), branches = lax.scan(body, init, None, length=stages)
+    snaps, kind, t, m, lam, fb, ta, ma, fa, stop, landed, dist = out
+    snaps = snaps & done
+    # decided without a snap, but not at the parameter bound (stop 1): the continuation
+    # gave up (buffer full, step too small); or never decided (every stage supercritical)
+    incomplete = ~done | (~snaps & (stop != 1))
+    # the reported states must be configurations of the contact-free model: the critical
+    # state (the start state where the path does not snap) and the landed one
+    crossed = self_intersects(t, scene) | (snaps & landed & self_intersects(ta, scene))
+    result = RESULTS.where(
+        ~ok0, start_eq.result,
+        RESULTS.where(incomplete, RESULTS.continuation_incomplete,
+                      RESULTS.where(snaps & ~landed, RESULTS.landing_failed,
+                                    RESULTS.where(crossed, RESULTS.self_intersecting, RESULTS.successful))))
+    start_result = RESULTS.where(ok0 & substituted, RESULTS.start_substituted, start_eq.result)
+    lost = snaps & ~landed  # no landed state: NaN rather than the failed relaxation's iterate
+    return SnapPath(
+        snaps=snaps,
+        alpha_c=jnp.where(snaps, lam, nan),
+        kind=jnp.where(snaps, kind, KIND_NONE),
+        theta_before=t,
+        force_before=m,
+        fold_height_before=jnp.where(snaps, fb, nan),
+        theta_after=jnp.where(lost, nan, ta),
+        force_after=jnp.where(lost, nan, ma),
+        fold_height_after=jnp.where(snaps & landed, fa, nan),
+        branch=branches,
+        result=result,
+        start_result=start_result,
+        stop=stop,
+        jump=jnp.where(snaps & landed, dist, nan),
+    )
+
+
+class SnapAngles(eqx.Module):
+    """Both paths of the quasi-static hysteresis loop: `up` and `down` are
+    [`jaxrod.SnapPath`][]s."""
+
+    up: SnapPath
+    down: SnapPath
+
+
+@eqx.filter_jit
+def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float = jnp.pi,
+                bisections: int = 24, polish: bool = True, continue_after_snap: bool = True) -> SnapAngles:
+    r"""Critical clamp angles $\alpha_{c,\rm up}>0$ and $\alpha_{c,\rm down}<0$ of a scene
+    under symmetric clamp rotation, their kinds, the states just before and after.
+
+    The clamp angles of `scene` are ignored (the loop starts at $\alpha=0$). A path that
+    reaches $|\alpha|=$`bound` without losing stability does not snap (`snaps=False`,
+    `alpha_c=NaN`, kind "none").
+
+    `polish=False` skips the extended-system Newton refinement (`jaxrod.critical_point`):
+    $\alpha_c$ is then the bisection value, within ~1e-8 rad of the polished one at
+    `bisections=24`, and carries no gradient (`refine_result` and `mode` are `None`).
+    Used by [`jaxrod.phase_diagram`][], where the refinement was a third of the cost.
+    `continue_after_snap=False` does not follow the landed branch after a snap (the second
+    `branch` stage is then empty, `count` 0); the critical angles are the same.
+
+    The angles are those of the scene's mesh: second-order accurate, off by up to 0.17 deg
+    at N = 100 ($s_0=0.02$). For the continuum value use
+    [`jaxrod.snap_angles_extrapolated`][] (Richardson from $N$ and $2N$, ~1e-5 deg).
+
+    `bound` must lie in $(0,\pi]$ (rad), `bisections` be a positive integer.
+    """
+    if not isinstance(settings, Continuation):
+        raise ValueError(f"settings must be a jaxrod.Continuation, got {settings!r}")
+    check_number("bound", bound, lo=0.0, hi=jnp.pi, hi_open=False)
+    check_int("bisections", bisections, lo=1)
+    check_bool("polish", polish)
+    check_bool("continue_after_snap", continue_after_snap)
+    parameter = SymmetricAlpha()
+    scene_d = parameter.set(float_scene(scene), 0.0)  # carries gradients to the refinement
+    scene = lax.stop_gradient(scene_d)
+    require_float64(jnp.result_type(scene.strip.psi0), "snap_angles")
+    # both start states through one traced body (index 0 up, 1 down), one after the other:
+    # `lax.map`, not `vmap`, which would batch the LAPACK kernels inside the Newton loops
+    # (see `_phase.py` for the XLA:CPU deadlock that batching caused)
+    starts = lax.map(lambda sg: initial_state_signed(scene, sg), jnp.array([1.0, -1.0], scene.strip.psi0.dtype))
+    return _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, continue_after_snap)
+
+
+def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, continue_after_snap=True):
+    """`snap_angles` from given start states (`starts`: the up and down equilibria of the
+    scene at alpha = 0 stacked on a leading axis, as `lax.map` of `initial_state_signed` makes
+    them; a member whose `result` is not successful does not exist)."""
+    parameter = SymmetricAlpha()
+    scene = lax.stop_gradient(scene_d)
+    dtype = jnp.result_type(scene.strip.psi0)
+    tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
+    pick = lambda tree, i: jax.tree.map(lambda x: x[i], tree)  # noqa: E731
+    up_eq, down_eq = pick(starts, 0), pick(starts, 1)
+    arrays = lambda e: eqx.filter(e, eqx.is_array)  # noqa: E731
+    static = eqx.filter(down_eq, eqx.is_array, inverse=True)
+
+    # The two paths run one after the other through a single traced body (one compiled
+    # copy of the continuation, refinement and landing): first snap down from the up
+    # state, then snap up from the down state; where the down state does not exist at
+    # alpha = 0, snap up starts from the state the snap-down half of the loop reached
+    # (its landing state, or the end of its branch if it did not snap).
+    def body(prev, direction):
+        # prev: what the snap-down path left for the snap-up start (see below)
+        lam_end, t_end, m_end, down_snaps, down_alpha, t_after, m_after = prev
+
+        def up_start(scene, lam_end, t_end, m_end, down_snaps, down_alpha, t_after, m_after):
+            alt_eq = solve_unflagged(parameter.set(scene, lam_end), t_end, m_end, Newton())
+            land_eq = solve_unflagged(parameter.set(scene, down_alpha - 1e-3), t_after, m_after, Newton())
+            return jax.tree.map(lambda c, b: jnp.where(down_snaps, c, b), arrays(land_eq), arrays(alt_eq))
+
+        has_down = down_eq.result == RESULTS.successful
+        need_alt = (direction > 0) & ~has_down
+        alt = run_if(need_alt, up_start, arrays(down_eq), (scene,) + prev)  # not lax.cond: see `run_if`
+        start = jax.tree.map(lambda u, d, a: jnp.where(direction < 0, u, jnp.where(has_down, d, a)),
+                             arrays(up_eq), arrays(down_eq), alt)
+        path = follow_path(scene, eqx.combine(start, static), direction, parameter, settings, bound, bisections, tol,
+                     continue_after_snap=continue_after_snap, substituted=need_alt)
+        br = jax.tree.map(lambda x: x[0], path.branch)  # first stage
+        last = br.count - 1
+        nxt = (br.lam[last], br.theta[last], br.force[last], path.snaps, path.alpha_c, path.theta_after,
+               path.force_after)
+        return nxt, (_polish(scene_d, path, parameter) if polish else path)
+
+    N = scene.mesh.n
+    z = jnp.zeros((), dtype)
+    init = (z, jnp.zeros(N, dtype), jnp.zeros(2, dtype), jnp.zeros((), bool), z, jnp.zeros(N, dtype),
+            jnp.zeros(2, dtype))
+    _, paths = lax.scan(body, init, jnp.array([-1.0, 1.0], dtype))
+    return SnapAngles(up=pick(paths, 1), down=pick(paths, 0))
+
+
+def _polish(scene_d, path, parameter):
+    """Refine the bisection result on the extended system (`jaxrod.critical_point`): the
+    differentiable alpha_c and critical state. Kept from bisection where it fails."""
+    sg = lax.stop_gradient
+    a0 = jnp.where(path.snaps, path.alpha_c, 0.0)
+    sc = parameter.set(sg(scene_d), a0)
+    K = kkt.structured(path.theta_before, path.force_before, sc)
+    v = kkt.modes(K, kkt.smallest_eigenvalues(K, 1))[:, 0]
+    kind = jnp.where(path.kind == KIND_NONE, KIND_FOLD, path.kind)
+    cp = critical_point(scene_d, path.theta_before, path.force_before, a0, v, kind, parameter=parameter)
+    # accept only a converged refinement that stays at the bisection point (1e-6 rad)
+    ok = path.snaps & (cp.result == RESULTS.successful) & (jnp.abs(sg(cp.alpha) - a0) < 1e-6)
+    pick = lambda new, old: jnp.where(ok, new, old)  # noqa: E731
+    refine_result = RESULTS.where(path.snaps, cp.result, RESULTS.successful)
+    refine_result = RESULTS.where(ok | ~path.snaps, refine_result, RESULTS.where(
+        cp.result == RESULTS.successful, RESULTS.max_steps_reached, cp.result))
+    # a failed refinement leaves the bisection value, which carries no derivative: say so
+    result = RESULTS.where((path.result == RESULTS.successful) & path.snaps & ~ok,
+                           RESULTS.derivative_unavailable, path.result)
+    return eqx.tree_at(
+        lambda p: (p.alpha_c, p.theta_before, p.force_before, p.fold_height_before, p.refine_result, p.mode,
+                   p.result),
+        path,
+        (pick(cp.alpha, path.alpha_c), pick(cp.theta, path.theta_before), pick(cp.force, path.force_before),
+         pick(cp.fold_height, path.fold_height_before), refine_result, jnp.where(ok, cp.mode, v), result),
+        is_leaf=lambda x: x is None,
+    )

@@ -1,0 +1,240 @@
+"""Design subcommands: `jaxrod design` (inverse design of snap angles or of the snapping
+speed, `--target-speed`) and
+`jaxrod reproduce` (the paper's numbers beside jaxrod's, Markdown report + figures).
+
+Each module in `jaxrod.cli._main._COMMAND_MODULES` defines `register(sub)`, which adds its
+subparsers to the `jaxrod` parser and attaches `handler=<function(args) -> exit code>`
+with `set_defaults`. Shared pieces: `jaxrod.cli._main.add_scene_args`, `make_scene_from_args`,
+`InputError` (one-line error, exit 2), `EXIT_OK`, `EXIT_USAGE`, `EXIT_NOT_CONVERGED`.
+
+`design` exit codes: 0 target reached, 3 not reached (the JSON, with `reached: false` and
+the best design found, is still printed), 2 bad input.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+
+from ._main import EXIT_NOT_CONVERGED, EXIT_OK, InputError
+
+
+def _save(design, path, rec):
+    """`--save PATH`: write PATH.eqx and PATH.json, record them in `rec` (InputError if not writable)."""
+    if not path:
+        return
+    try:
+        design.save(path)
+    except OSError as e:
+        raise InputError(f"save: cannot write {path!r}: {e.strerror or e}") from None
+    rec["saved"] = [path + ".eqx", path + ".json"]
+
+
+def _bounds(text):
+    """'psi0=30:120,gap=0.3:0.95,s0=0.01:0.05' -> {'psi0_deg': (30, 120), ...}."""
+    out = {}
+    if not text:
+        return out
+    alias = {"psi0": "psi0_deg", "psi0_deg": "psi0_deg", "gap": "gap", "s0": "s0"}
+    for item in text.split(","):
+        try:
+            name, rng = item.split("=")
+            lo, hi = (float(v) for v in rng.split(":"))
+        except ValueError:
+            raise InputError(f"bounds: cannot parse {item!r} (expected NAME=LO:HI, e.g. gap=0.3:0.95)") from None
+        if name.strip() not in alias:
+            raise InputError(f"bounds: unknown parameter {name!r} (psi0, gap, s0)")
+        out[alias[name.strip()]] = (lo, hi)
+    return out
+
+
+def _finite_or_none(x):
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _cmd_design_speed(args):
+    """`--target-speed`: study (c), the gap (and s0 with --free-s0) with v_s = target at --psi0."""
+    angle_targets = (args.target_alpha_up, args.target_alpha_down, args.target_hysteresis)
+    if any(t is not None for t in angle_targets):
+        raise InputError("target-speed: cannot be combined with angle targets (--target-alpha-up/-down, "
+                         "--target-hysteresis); design one or the other")
+    v = args.target_speed
+    if not math.isfinite(v) or v <= 0:
+        raise InputError(f"target-speed: must be a finite number > 0 (v_s / v*), got {v}")
+    psi0 = 90.0 if args.psi0 is None else args.psi0
+    if not math.isfinite(psi0) or not 0 < psi0 <= 180:
+        raise InputError(f"psi0: must be in (0, 180] degrees, got {psi0}")
+    tol = args.speed_tol
+    if not math.isfinite(tol) or not 0 < tol < 1:
+        raise InputError(f"speed-tol: must be a relative tolerance in (0, 1), got {tol}")
+    n = 48 if args.n is None else args.n
+    if n < 8 or n % 2:
+        raise InputError(f"n: must be an even integer >= 8, got {n}")
+    n_check = 2 * n if args.check_n is None else args.check_n
+    if n_check < 8 or n_check % 2 or n_check <= n:
+        raise InputError(f"check-n: must be an even integer > n = {n}, got {n_check}")
+    starts = 1 if args.starts is None else args.starts
+    if starts < 1:
+        raise InputError(f"starts: must be >= 1, got {starts}")
+    if args.max_iter < 1:
+        raise InputError(f"max-iter: must be >= 1, got {args.max_iter}")
+    if not math.isfinite(args.s0) or args.s0 <= 0:
+        raise InputError(f"s0: must be a finite number > 0, got {args.s0}")
+    import jaxrod.design as ds
+
+    if not ds.dynamics_available():
+        raise InputError("target-speed: the snapping-speed design needs jaxrod.snap_speed, which is not available")
+    bounds = _bounds(args.bounds)
+    lo, hi = bounds.get("gap", (0.05, 0.95))
+    gaps = [0.5] if starts == 1 else [lo + (hi - lo) * (k + 1) / (starts + 1) for k in range(starts)]
+    gaps = [min(max(g, lo + 1e-3), hi - 1e-3) for g in gaps]
+    try:
+        res = ds.snap_speed_study(v, psi0, s0=args.s0, free_s0=args.free_s0, bounds=bounds, gaps=gaps, n=n,
+                                  n_check=n_check, tol=tol, max_iter=args.max_iter, progress=not args.json)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    b, chk = res.design, res.verification
+    rec = {"psi0_deg": b.psi0_deg, "gap": b.gap, "s0": b.s0, "snap_speed": _finite_or_none(res.v_s),
+           "target_snap_speed": v, "tol": tol, "reached": res.reached, "design_reached": bool(b.reached),
+           "status": b.status, "num_iterations": int(b.num_iterations), "n": n,
+           "check": chk.to_dict(), "message": res.message, "num_starts": len(res.runs),
+           "wall_time_s": res.wall_time}
+    _save(b, args.save, rec)
+    if args.json:
+        print(json.dumps(rec))
+    else:
+        print(f"design: Psi0 = {b.psi0_deg:.4f} deg, G/L = {b.gap:.5f}, s0 = {b.s0:.5g}  (n = {n})")
+        print(f"  snap_speed  {res.v_s:.4f} v*  (target {v:g} +- {100 * tol:g} %)")
+        print(f"  check at N = {chk.n} ({chk.solver}, rtol {chk.rtol:g}): v_s = {chk.v_s:.4f} v*, "
+              f"error {100 * chk.error:.3f} %")
+        print(f"  {res.message}; {res.wall_time:.1f} s")
+    return EXIT_OK if res.reached else EXIT_NOT_CONVERGED
+
+
+def _cmd_design(args):
+    if args.target_speed is not None:
+        return _cmd_design_speed(args)
+    if args.psi0 is not None:
+        raise InputError("psi0: only used with --target-speed (the angle design optimizes Psi0; "
+                         "fix it with --bounds psi0=LO:HI)")
+    if args.n is None:
+        args.n = 100
+    if args.starts is None:
+        args.starts = 4
+    targets = [(args.target_alpha_up, "up"), (args.target_alpha_down, "down"), (args.target_hysteresis, "hyst")]
+    if all(t is None for t, _ in targets):
+        raise InputError("design: give at least one target (--target-alpha-up, --target-alpha-down, "
+                         "--target-hysteresis)")
+    for val, name in ((args.target_alpha_up, "target-alpha-up"), (args.target_alpha_down, "target-alpha-down"),
+                      (args.target_hysteresis, "target-hysteresis"), (args.tol, "tol"), (args.s0, "s0")):
+        if val is not None and not math.isfinite(val):
+            raise InputError(f"{name}: must be a finite number, got {val}")
+    if args.tol <= 0:
+        raise InputError(f"tol: must be > 0, got {args.tol}")
+    if args.starts < 1:
+        raise InputError(f"starts: must be >= 1, got {args.starts}")
+    if args.n < 8 or args.n % 2:
+        raise InputError(f"n: must be an even integer >= 8, got {args.n}")
+    if args.max_iter < 1:
+        raise InputError(f"max-iter: must be >= 1, got {args.max_iter}")
+    import jax
+    import jax.numpy as jnp
+
+    import jaxrod.design as ds
+
+    free = ("psi0_deg", "gap") + (("s0",) if args.free_s0 else ())
+    try:
+        param = ds.Parametrization(free=free, bounds=_bounds(args.bounds), fixed={"s0": args.s0})
+        terms = []
+        if args.target_alpha_up is not None:
+            terms.append(ds.AlphaUp(args.target_alpha_up, tol=args.tol))
+        if args.target_alpha_down is not None:
+            terms.append(ds.AlphaDown(args.target_alpha_down, tol=args.tol))
+        if args.target_hysteresis is not None:
+            terms.append(ds.Hysteresis(args.target_hysteresis, tol=args.tol))
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    z0 = jnp.concatenate([param.from_values()[None], param.sample(jax.random.PRNGKey(args.seed), args.starts - 1)])
+    res = ds.optimize(terms, param, z0, n=args.n, max_iter=args.max_iter, progress=not args.json)
+    b = res.best
+    rec = b.to_dict()
+    rec.update({"num_starts": res.num_starts, "num_reached": res.num_reached, "wall_time_s": res.wall_time})
+    _save(b, args.save, rec)
+    if args.json:
+        print(json.dumps(rec))
+    else:
+        print(f"design: Psi0 = {b.psi0_deg:.4f} deg, G/L = {b.gap:.5f}, s0 = {b.s0:.5g}  (n = {b.n})")
+        for nm, a, t in zip(b.names, b.achieved.tolist(), b.targets.tolist()):
+            print(f"  {nm:<18} {a:+.4f} deg  (target {t:+g} +- {args.tol:g})")
+        print(f"  {b.message}; {res.num_reached}/{res.num_starts} starts reached the target "
+              f"in {res.wall_time:.1f} s")
+    return EXIT_OK if bool(b.reached) else EXIT_NOT_CONVERGED
+
+
+def _cmd_reproduce(args):
+    from . import _reproduce
+
+    try:
+        os.makedirs(args.out, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"out: cannot create directory {args.out!r}: {e.strerror or e}") from None
+    path = _reproduce.run(args.out, quick=args.quick, progress=True)
+    print(f"wrote {path}")
+    return EXIT_OK
+
+
+def register(sub):
+    """Add `design` and `reproduce` to the `jaxrod` argument parser."""
+    import argparse
+
+    from ._main import _EPILOG, _number
+
+    p = sub.add_parser("design", help="find (Psi0, G/L) with given snap angles, or the gap with a snap speed",
+                       description="Inverse design: multi-start Levenberg-Marquardt on (Psi0, G/L) [and s0]\n"
+                                   "with implicit derivatives of the critical clamp angles; prints the design,\n"
+                                   "the achieved values (on the design mesh --n) and whether the targets were\n"
+                                   "reached (exit 3 if not).\n\n"
+                                   "With --target-speed V: the gap G/L [and s0] at fold angle --psi0 whose\n"
+                                   "quasi-static snap up has v_s = V v* (jaxrod.snap_speed: fixed-step brink\n"
+                                   "dynamics, differentiable), within --speed-tol, then an independent check by\n"
+                                   "jaxrod.snap_dynamics (adaptive Dopri8, rtol 1e-9) on --check-n segments;\n"
+                                   "reached only if both agree.",
+                       epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--target-alpha-up", type=_number, default=None, metavar="DEG", help="alpha_c_up target")
+    p.add_argument("--target-alpha-down", type=_number, default=None, metavar="DEG", help="alpha_c_down target")
+    p.add_argument("--target-hysteresis", type=_number, default=None, metavar="DEG",
+                   help="alpha_c_up - alpha_c_down target")
+    p.add_argument("--target-speed", type=_number, default=None, metavar="V",
+                   help="snapping speed v_s / v* of the snap up (designs the gap at --psi0)")
+    p.add_argument("--psi0", type=_number, default=None, metavar="DEG",
+                   help="fold angle for --target-speed (default 90)")
+    p.add_argument("--speed-tol", type=_number, default=0.01, metavar="FRAC",
+                   help="relative tolerance of --target-speed (default %(default)g)")
+    p.add_argument("--check-n", type=int, default=None, metavar="N",
+                   help="mesh of the independent check of --target-speed (default 2 x --n)")
+    p.add_argument("--tol", type=_number, default=0.1, metavar="DEG", help="angle tolerance, deg (default %(default)g)")
+    p.add_argument("--bounds", default="", metavar="SPEC",
+                   help="e.g. psi0=30:120,gap=0.3:0.95 (defaults psi0 10:180, gap 0.05:0.95, s0 0.005:0.1)")
+    p.add_argument("--s0", type=_number, default=0.02, help="fold width (fixed unless --free-s0)")
+    p.add_argument("--free-s0", action="store_true", help="also optimize s0")
+    p.add_argument("--n", type=int, default=None,
+                   help="design mesh, segments (default 100; 48 with --target-speed)")
+    p.add_argument("--starts", type=int, default=None,
+                   help="number of starts (default 4; 1 with --target-speed, gap 0.5)")
+    p.add_argument("--max-iter", type=int, default=30, help="iterations per start (default %(default)d)")
+    p.add_argument("--seed", type=int, default=0, help="random starts seed")
+    p.add_argument("--save", metavar="PATH", default=None, help="write PATH.eqx and PATH.json")
+    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p.set_defaults(handler=_cmd_design)
+
+    r = sub.add_parser("reproduce", help="the paper's numbers beside jaxrod's (Markdown report + figures)",
+                       description="Compute the paper's results with the default strip and write\n"
+                                   "DIR/report.md, DIR/results.json and figures. Sections that need the\n"
+                                   "dynamics are marked 'not available yet' until that API exists.\n"
+                                   "An interrupted run resumes from DIR/cache.json.",
+                       epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    r.add_argument("--out", metavar="DIR", default="jaxrod-reproduce", help="output directory")
+    r.add_argument("--quick", action="store_true", help="coarser mesh and sweep (about 1 min on 2 cores; the default about 2 min)")
+    r.set_defaults(handler=_cmd_reproduce)

@@ -1,0 +1,378 @@
+"""Dynamics subcommands: snap, speed-plane.
+
+Each module in `jaxrod.cli._main._COMMAND_MODULES` defines `register(sub)`, which adds its
+subparsers to the `jaxrod` parser and attaches `handler=<function(args) -> exit code>`
+with `set_defaults`. Shared pieces: `jaxrod.cli._main.add_scene_args`, `make_scene_from_args`,
+`InputError` (one-line error, exit 2), `EXIT_OK`, `EXIT_USAGE`, `EXIT_NOT_CONVERGED`.
+
+`jaxrod snap` integrates one snap (brink, ramp or asymmetric scene) and prints v_s in
+units of v* (and in m/s when the strip's material is given); `jaxrod speed-plane` runs
+the grid Psi0 x G/L of brink snaps, writes each point to `DIR/speed_plane.csv` as it is
+done (the whole file rewritten atomically: temp file, then `os.replace`; each row carries
+the settings it was computed with), fits v_s/v* = v_m - a G/L - b Psi0 and draws
+`DIR/speed_plane.png`. A rerun reads back the points already there with the same
+settings and computes only the others; a torn or unreadable row is dropped and its
+point recomputed.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+
+from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _result_name, add_scene_args, make_scene_from_args)
+
+PAPER_FIT = (42.59, 30.38, 5.00)
+
+
+def _add_run_args(p):
+    g = p.add_argument_group("dynamics")
+    g.add_argument("--direction", choices=("up", "down"), default="up", help="snap up or down (default up)")
+    g.add_argument("--nudge", type=float, default=0.05, help="brink: nudge along the unstable mode, rad (default 0.05)")
+    g.add_argument("--rate", type=float, default=0.5, help="ramp/asymmetric: clamp rate, rad per T (default 0.5)")
+    g.add_argument("--solver", default="rattle",
+                   help="rattle (default: fixed step, symplectic), tsit5, dopri5, dopri8, kvaerno3, kvaerno5")
+    g.add_argument("--rtol", type=float, default=1e-6,
+                   help="adaptive solvers: relative = absolute tolerance (default 1e-6)")
+    g.add_argument("--t1", type=float, default=4.0, help="time limit in T (default 4)")
+
+
+def register(sub):
+    """Add `snap` and `speed-plane` to the `jaxrod` argument parser."""
+    p = sub.add_parser("snap", help="integrate one dynamic snap, report the snapping speed v_s")
+    add_scene_args(p)
+    p.add_argument("--scene", choices=("brink", "ramp", "asymmetric"), default="brink",
+                   help="brink (critical state nudged), ramp (clamps rotated through alpha_c), asymmetric "
+                        "(only the right clamp rotated from --alpha-right, left held at --alpha)")
+    _add_run_args(p)
+    m = p.add_argument_group("physical units (all five to report m/s and s)")
+    for name in ("youngs-modulus", "density", "thickness", "width", "length"):
+        m.add_argument(f"--{name}", type=float, default=None)
+    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p.add_argument("--plot", metavar="DIR", default=None, help="write fold.png, speed_map.png, energies.png, chrono.png")
+    p.add_argument("--animate", metavar="FILE.gif", default=None, help="write an animated GIF of the snap")
+    p.set_defaults(handler=_cmd_snap)
+
+    q = sub.add_parser("speed-plane", help="v_s over Psi0 x G/L (brink snaps), CSV + fit + figure; resumable")
+    q.add_argument("--out", metavar="DIR", default="jaxrod-speed-plane",
+                   help="output directory; a rerun resumes from DIR/speed_plane.csv, reusing the points computed "
+                        "with the same settings (default %(default)s)")
+    q.add_argument("--psi0", default="30,60,90,120,180", help="comma-separated fold angles, deg")
+    q.add_argument("--gaps", default="0.3,0.4,0.5,0.6,0.7", help="comma-separated G/L")
+    q.add_argument("--n", type=int, default=60, help="segments (default 60)")
+    q.add_argument("--s0", type=float, default=0.02)
+    _add_run_args(q)
+    q.set_defaults(handler=_cmd_speed_plane)
+
+
+def _check_run_args(args):
+    import jaxrod as jr
+
+    from ..dynamics import SOLVERS
+
+    if args.solver not in SOLVERS:
+        raise InputError(f"solver must be one of {sorted(SOLVERS)}, got {args.solver!r}")
+    for name in ("nudge", "rate", "rtol", "t1"):
+        v = getattr(args, name)
+        if not (math.isfinite(v) and v > 0):
+            raise InputError(f"{name} must be a finite number > 0, got {v!r}")
+
+
+def _physical(args):
+    vals = [getattr(args, k) for k in ("youngs_modulus", "density", "thickness", "width", "length")]
+    if all(v is None for v in vals):
+        return None
+    if any(v is None for v in vals):
+        raise InputError("youngs-modulus, density, thickness, width, length: give all five or none")
+    import jaxrod as jr
+
+    try:
+        st = jr.Strip.from_physical(youngs_modulus=vals[0], density=vals[1], thickness=vals[2], width=vals[3],
+                                    length=vals[4])
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    return float(st.speed_gauge), float(st.time_unit)
+
+
+def run_snap(scene, args, kind):
+    import jaxrod as jr
+
+    kw = dict(solver=args.solver, rtol=args.rtol, atol=args.rtol, t1=args.t1)
+    try:
+        if kind == "asymmetric":
+            start, tr = jr.snap_dynamics(scene, args.direction, kind="asymmetric", rate=args.rate,
+                                         alpha_start=float(scene.clamps.alpha_right), **kw)
+        else:
+            start, tr = jr.snap_dynamics(scene, args.direction, kind=kind, nudge=args.nudge, rate=args.rate, **kw)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    return start, tr
+
+
+def _record(start, tr, phys=None):
+    import numpy as np
+
+    import jaxrod as jr
+
+    def f(x):
+        x = float(x)
+        return x if math.isfinite(x) else None
+
+    t = np.asarray(tr.t)
+    fs = np.asarray(tr.fold_speed)
+    ok = np.isfinite(fs)
+    # snap duration: time the fold speed stays above half its peak
+    above = t[ok][fs[ok] >= 0.5 * float(tr.v_s)]
+    duration = float(above[-1] - above[0]) if above.size else float("nan")
+    solved = bool(start.ok) and bool(tr.result == jr.RESULTS.successful)
+    rec = dict(
+        alpha_c_deg=f(np.degrees(float(start.alpha_c))),
+        snapped=bool(tr.snapped),
+        v_s=f(tr.v_s),
+        t_peak=f(tr.t_peak),
+        t_snap=f(tr.t_cross),
+        snap_duration=f(duration),
+        t_end=f(tr.t_end),
+        bending_energy_before=f(start.bending_before),
+        kinetic_energy_peak=f(tr.kinetic_peak),
+        energy_drift=f(tr.energy_drift),
+        num_steps=int(tr.num_steps),
+        converged=solved,
+        result=_result_name(tr.result),
+        units="L = B = lambda = 1: speeds in v*, times in T = L/v*, energies in B/L",
+    )
+    if phys is not None:
+        vstar, T = phys
+        rec.update(v_s_m_per_s=f(float(tr.v_s) * vstar), t_snap_s=f(float(tr.t_cross) * T),
+                   snap_duration_s=f(duration * T), v_star_m_per_s=vstar, time_unit_s=T)
+    return rec
+
+
+def _cmd_snap(args):
+    _check_run_args(args)
+    phys = _physical(args)
+    scene = _array_leaves(make_scene_from_args(args))
+    start, tr = run_snap(scene, args, args.scene)
+    rec = _record(start, tr, phys)
+    import jaxrod as jr
+
+    from ..plot import animate_snap, plot_snap
+
+    if args.plot or args.animate:
+        # rerun with the frames on the snap itself (a few durations before the peak to the end)
+        dur = rec["snap_duration"] or 0.05
+        ta = max(0.0, float(tr.t_peak) - 4.0 * dur)
+        tb = float(tr.t_end)
+        tr = jr.simulate(start.scene, start.theta0, start.protocol, direction=start.direction, t1=tb,
+                         stop_at_snap=args.scene != "asymmetric", solver=args.solver, rtol=args.rtol, atol=args.rtol,
+                         frame_window=(ta, tb), n_frames=48)
+    try:
+        if args.plot:
+            rec["figures"] = plot_snap(tr, args.plot, title=f"Psi0 = {args.psi0:g} deg, G/L = {args.gap:g}")
+        if args.animate:
+            rec["animation"] = animate_snap(tr, args.animate)
+    except OSError as e:
+        raise InputError(f"plot/animate: cannot write: {e.strerror or e}") from None
+    if args.json:
+        print(json.dumps(rec))
+    else:
+        for k, v in rec.items():
+            print(f"{k:24s} {v}")
+    return EXIT_OK if rec["converged"] else EXIT_NOT_CONVERGED
+
+
+# One row per grid point. The settings a row was computed with are columns of the row
+# itself (`SETTINGS`): a rerun reuses exactly the rows of its own settings and computes the
+# rest, rows of other settings stay in the file untouched (and out of this run's fit).
+SETTINGS = ["n", "s0", "direction", "nudge", "solver", "rtol", "t1"]
+RESULT_FIELDS = ["snaps", "alpha_c_deg", "v_s", "t_snap", "kinetic_energy_peak", "bending_energy_before",
+                 "num_steps"]
+FIELDS = ["psi0_deg", "gap", *SETTINGS, *RESULT_FIELDS]
+
+
+def fit_plane(rows):
+    """Least-squares v_s = v_m - a G - b Psi0 (Psi0 in rad) over the snapping rows; returns
+    (v_m, a, b), their standard errors, and the rms residual."""
+    import numpy as np
+
+    r = [x for x in rows if x["snaps"] and x["v_s"] is not None and math.isfinite(x["v_s"])]
+    G = np.array([x["gap"] for x in r])
+    P = np.radians([x["psi0_deg"] for x in r])
+    v = np.array([x["v_s"] for x in r])
+    A = np.stack([np.ones_like(G), -G, -P], 1)
+    coef, *_ = np.linalg.lstsq(A, v, rcond=None)
+    res = v - A @ coef
+    dof = max(len(v) - 3, 1)
+    cov = np.linalg.inv(A.T @ A) * (res @ res) / dof
+    return coef.tolist(), np.sqrt(np.diag(cov)).tolist(), float(np.sqrt(np.mean(res**2)))
+
+
+def _settings(args):
+    return dict(n=int(args.n), s0=float(args.s0), direction=args.direction, nudge=float(args.nudge),
+                solver=args.solver, rtol=float(args.rtol), t1=float(args.t1))
+
+
+def _parse_row(r):
+    """One CSV row (a list of strings in FIELDS order) -> dict; ValueError when it is not a
+    complete row this code wrote (a row torn by an interrupted write, an edited file)."""
+    if len(r) != len(FIELDS):
+        raise ValueError(f"{len(r)} fields instead of {len(FIELDS)}")
+    r = dict(zip(FIELDS, r))
+
+    def num(text, kind=float):
+        if text in ("", "None", "nan"):
+            return None
+        return kind(text)
+
+    if r["direction"] not in ("up", "down") or r["snaps"] not in ("True", "False") or not r["solver"]:
+        raise ValueError("bad direction, snaps or solver")
+    row = dict(psi0_deg=float(r["psi0_deg"]), gap=float(r["gap"]), n=int(r["n"]), s0=float(r["s0"]),
+               direction=r["direction"], nudge=float(r["nudge"]), solver=r["solver"], rtol=float(r["rtol"]),
+               t1=float(r["t1"]), snaps=r["snaps"] == "True", num_steps=num(r["num_steps"], int))
+    row.update({k: num(r[k]) for k in RESULT_FIELDS if k not in row})
+    return row
+
+
+def _read_rows(path):
+    """The complete rows of `path` and how many lines were dropped as unreadable (`[]`, 0
+    when there is no file). A last line without its newline is a torn write and dropped.
+    A file whose header is not FIELDS (an older jaxrod's, without the settings columns, or
+    not this command's) is refused with one line: its rows cannot be matched to settings."""
+    if not os.path.exists(path):
+        return [], 0
+    with open(path, newline="") as fh:
+        text = fh.read()
+    lines = text.splitlines(keepends=True)
+    dropped = 0
+    if lines and not lines[-1].endswith("\n"):  # torn by a kill during the write
+        lines.pop()
+        dropped += 1
+    if not lines:
+        return [], dropped
+    records = list(csv.reader(lines))
+    if records[0] != FIELDS:
+        raise InputError(f"out: {path} is not a speed-plane CSV with the columns {','.join(FIELDS)} (an older "
+                         "jaxrod's has no settings columns): move it away or choose another --out")
+    rows = []
+    for r in records[1:]:
+        try:
+            rows.append(_parse_row(r))
+        except (ValueError, TypeError):
+            dropped += 1
+    return rows, dropped
+
+
+def _write_atomic(path, write):
+    """`write(fh)` into `path` + ".part", then `os.replace` onto `path`: a kill at any
+    moment leaves either the old file or the new one, never a part of one."""
+    tmp = path + ".part"
+    with open(tmp, "w", newline="") as fh:
+        write(fh)
+    os.replace(tmp, path)
+
+
+def _write_rows(path, rows):
+    def write(fh):
+        w = csv.DictWriter(fh, FIELDS)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: r.get(k) for k in FIELDS})
+
+    _write_atomic(path, write)
+
+
+def _cmd_speed_plane(args):
+    import sys
+
+    import numpy as np
+    from tqdm import tqdm
+
+    import jaxrod as jr
+
+    _check_run_args(args)
+    try:
+        psis = [float(x) for x in args.psi0.split(",")]
+        gaps = [float(x) for x in args.gaps.split(",")]
+    except ValueError:
+        raise InputError("psi0/gaps: comma-separated numbers expected") from None
+    try:
+        for p in psis:
+            for g in gaps:
+                jr.make_scene(p, g, 0, s0=args.s0, n=args.n)
+        os.makedirs(args.out, exist_ok=True)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    except OSError as e:
+        raise InputError(f"out: cannot create {args.out!r}: {e.strerror or e}") from None
+    path = os.path.join(args.out, "speed_plane.csv")
+    settings = _settings(args)
+    mine = lambda r: all(r[k] == v for k, v in settings.items())  # noqa: E731
+    rows, dropped = _read_rows(path)
+    done = {(r["psi0_deg"], r["gap"]) for r in rows if mine(r)}
+    grid = [(p, g) for p in psis for g in gaps]
+    todo = [pt for pt in grid if pt not in done]
+    if dropped:
+        print(f"jaxrod speed-plane: dropped {dropped} unreadable row(s) of {path} (an interrupted write?); "
+              "their points are recomputed", file=sys.stderr)
+    print(f"jaxrod speed-plane: {len(grid) - len(todo)} of {len(grid)} points read back from {path}, "
+          f"{len(todo)} to compute", file=sys.stderr)
+    if dropped or not os.path.exists(path):
+        _write_rows(path, rows)
+    computed = []
+    for p, g in tqdm(todo, desc="speed plane", unit="strip"):
+        scene = _array_leaves(jr.make_scene(p, g, 0, s0=args.s0, n=args.n))
+        snap = jr.snap_angles(scene)
+        path_ = snap.up if args.direction == "up" else snap.down
+        row = dict(psi0_deg=p, gap=g, **settings, snaps=bool(path_.snaps))
+        if row["snaps"]:
+            start, tr = jr.snap_dynamics(scene, args.direction, kind="brink", nudge=args.nudge, snap=snap,
+                                         solver=args.solver, rtol=args.rtol, atol=args.rtol, t1=args.t1)
+            row.update(alpha_c_deg=float(np.degrees(start.alpha_c)), v_s=float(tr.v_s),
+                       t_snap=float(tr.t_cross), kinetic_energy_peak=float(tr.kinetic_peak),
+                       bending_energy_before=float(start.bending_before), num_steps=int(tr.num_steps))
+            row["snaps"] = bool(tr.snapped)
+        rows.append({k: row.get(k) for k in FIELDS})
+        _write_rows(path, rows)  # the whole file, atomically, after every point
+        computed.append([p, g])
+    first, wanted = {}, set(grid)
+    for r in rows:  # this run's rows in grid order (the first where a point is there twice)
+        if mine(r) and (r["psi0_deg"], r["gap"]) in wanted:
+            first.setdefault((r["psi0_deg"], r["gap"]), r)
+    rows = [first[pt] for pt in grid]
+    out = dict(points=len(rows), snapping=sum(bool(r["snaps"]) for r in rows), csv=path, computed_points=computed)
+    if out["snapping"] >= 4:
+        coef, err, rms = fit_plane(rows)
+        out.update(fit=dict(v_m=coef[0], a=coef[1], b=coef[2], stderr=err, rms=rms),
+                   paper=dict(v_m=PAPER_FIT[0], a=PAPER_FIT[1], b=PAPER_FIT[2]))
+        _plot_plane(rows, coef, os.path.join(args.out, "speed_plane.png"))
+        out["figure"] = os.path.join(args.out, "speed_plane.png")
+    _write_atomic(os.path.join(args.out, "speed_plane_fit.json"), lambda fh: json.dump(out, fh, indent=1))
+    print(json.dumps(out))
+    return EXIT_OK
+
+
+def _plot_plane(rows, coef, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    psis = sorted({r["psi0_deg"] for r in rows})
+    g = np.linspace(0.25, 0.75, 20)
+    for i, p in enumerate(psis):
+        r = sorted([x for x in rows if x["psi0_deg"] == p and x["snaps"]], key=lambda x: x["gap"])
+        c = f"C{i}"
+        ax.plot([x["gap"] for x in r], [x["v_s"] for x in r], "o", color=c, label=f"Psi0 = {p:g} deg")
+        ax.plot(g, coef[0] - coef[1] * g - coef[2] * np.radians(p), "-", color=c, lw=0.8)
+        ax.plot(g, PAPER_FIT[0] - PAPER_FIT[1] * g - PAPER_FIT[2] * np.radians(p), ":", color=c, lw=0.8)
+    ax.set_xlabel("G / L")
+    ax.set_ylabel("v_s / v*")
+    ax.set_title("brink snaps: points; fit (solid); paper's plane (dotted)")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

@@ -1,0 +1,463 @@
+r"""Command-line interface: `jaxrod equilibrium ...` and `jaxrod demo` (the default).
+
+Nondimensional units throughout ($L = B = \lambda = 1$), angles in degrees, float64.
+
+Exit codes: 0 success; 2 bad input (one line on stderr naming the parameter);
+3 the solver did not converge or the requested state does not exist (the JSON, with
+`converged: false` and the result message, is still printed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import os
+import sys
+import warnings
+
+EXIT_OK = 0
+EXIT_USAGE = 2
+EXIT_NOT_CONVERGED = 3
+
+DEFAULTS = dict(psi0=60.0, gap=0.5, alpha=0.0, s0=0.02, n=100, refine=1.0)
+
+_EPILOG = """\
+Units: L = B = lambda = 1 (nondimensional); angles in degrees.
+Exit codes: 0 ok, 2 bad input, 3 no converged equilibrium (JSON still printed).
+Compiled code is cached between runs in ~/.cache/jaxrod/xla (or JAX_COMPILATION_CACHE_DIR;
+JAXROD_NO_CACHE=1 disables it): the first run of a command compiles for up to a minute."""
+
+
+# modules that register more subcommands (see `_build_parser`)
+_COMMAND_MODULES = ("._critical", "._statics", "._dynamics", "._design")
+
+
+class InputError(Exception):
+    """Bad user input: reported as one line on stderr, exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose errors are one line on stderr (no usage block), exit 2."""
+
+    def error(self, message):
+        raise InputError(message)
+
+
+def _quiet():
+    """Silence JAX/XLA/equinox chatter so CLI output is only what we print."""
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
+    os.environ.setdefault("GRPC_VERBOSITY", "ERROR")
+    for name in ("jax", "jaxlib", "jax._src.xla_bridge", "equinox", "absl"):
+        logging.getLogger(name).setLevel(logging.ERROR)
+    for mod in ("jax", "jaxlib", "equinox", "jaxtyping", "matplotlib"):
+        warnings.filterwarnings("ignore", module=mod)
+    warnings.filterwarnings("ignore", category=UserWarning, message=".*(GPU|TPU|CUDA|cuda).*")
+    warnings.filterwarnings("ignore", category=FutureWarning)
+    warnings.filterwarnings("ignore", category=DeprecationWarning)
+
+
+def _number(text):
+    """float() that also accepts 'nan'/'inf' so the library reports them by name."""
+    return float(text)
+
+
+def add_scene_args(p):
+    g = p.add_argument_group("strip and clamps (L = 1, angles in degrees)")
+    g.add_argument("--psi0", type=_number, default=DEFAULTS["psi0"], metavar="DEG",
+                   help="fold angle Psi0 in (0, 180] degrees; 180 = flat strip (default %(default)g)")
+    g.add_argument("--gap", type=_number, default=DEFAULTS["gap"], metavar="G",
+                   help="clamp gap G/L in (0, 1) (default %(default)g)")
+    g.add_argument("--alpha", type=_number, default=DEFAULTS["alpha"], metavar="DEG",
+                   help="clamp angle alpha (both clamps unless --alpha-right; default %(default)g)")
+    g.add_argument("--alpha-right", type=_number, default=None, metavar="DEG",
+                   help="right clamp angle alpha_R for asymmetric actuation (default: = --alpha)")
+    g.add_argument("--s0", type=_number, default=DEFAULTS["s0"], metavar="S0",
+                   help="fold width s0/L > 0 (default %(default)g)")
+    g.add_argument("--n", type=int, default=DEFAULTS["n"], metavar="N",
+                   help="number of segments, even, >= 8 (default %(default)d)")
+    g.add_argument("--refine", type=_number, default=DEFAULTS["refine"], metavar="R",
+                   help="mesh refinement ratio at the crease, >= 1 (default %(default)g)")
+    g.add_argument("--stretching", type=_number, default=None, metavar="K",
+                   help="axial stiffness K L^2/B (extensible strip; default: inextensible)")
+    g.add_argument("--gravity", type=_number, default=None, metavar="g",
+                   help="gravity g in units of B/(lambda L^3) (default: none)")
+
+
+def _build_parser():
+    from .. import __version__
+
+    parser = _Parser(
+        prog="jaxrod",
+        description="Equilibria and stability of a creased elastic strip between two clamps.\n"
+                    "Without a subcommand, runs `jaxrod demo`.",
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"jaxrod {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="{equilibrium,snap-angles,demo}")
+
+    p = sub.add_parser("equilibrium", help="solve the up or down equilibrium of one strip",
+                       description="Solve the stable up or down state of a creased strip and report\n"
+                                   "fold height, energies, end compression and the smallest eigenvalues\n"
+                                   "of the constrained Hessian (asymmetric modes included).",
+                       epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_scene_args(p)
+    p.add_argument("--state", choices=("up", "down"), default="down",
+                   help="which state: up (fold height > 0) or down (< 0) (default %(default)s)")
+    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p.add_argument("--plot", metavar="FILE.png", default=None, help="draw the shape with its clamps to FILE")
+
+    q = sub.add_parser("snap-angles", help="critical clamp angles of both snapping paths",
+                       description="Continue the down state (alpha increasing) and the up state (alpha\n"
+                                   "decreasing) under symmetric clamp rotation and report where each loses\n"
+                                   "stability (alpha_c), of what kind (fold or branch_point), and the fold\n"
+                                   "height just before and after. --alpha is ignored (the loop starts at 0).",
+                       epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_scene_args(q)
+    q.add_argument("--no-extrapolate", dest="extrapolate", action="store_false",
+                   help="report the angles of the n-segment mesh only (error up to ~0.17 deg at n = 100) instead "
+                        "of the default Richardson extrapolation from n and 2n segments (error ~1e-4 deg)")
+    q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+
+    d = sub.add_parser("demo", help="up and down states of the default strip, table + PNG + JSON (default)",
+                       description="Solve the up and down equilibria of the default strip (Psi0 = 60 deg,\n"
+                                   "G/L = 0.5, s0 = 0.02, alpha = 0, n = 100), print a table and write\n"
+                                   "DIR/equilibria.png and DIR/equilibria.json.",
+                       epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    d.add_argument("--out", metavar="DIR", default="jaxrod-out", help="output directory (default %(default)s)")
+    # further subcommands live in their own modules; each calls `sub.add_parser(...)` and
+    # `set_defaults(handler=...)`, the handler taking the parsed args and returning an exit code
+    import importlib
+
+    for name in _COMMAND_MODULES:
+        importlib.import_module(name, __package__).register(sub)
+    sub.metavar = "{" + ",".join(sub.choices) + "}"
+    return parser
+
+
+def make_scene_from_args(args):
+    import jaxrod as jr
+
+    stretching = gravity = None
+    if args.stretching is not None:
+        try:
+            stretching = jr.Stretching(args.stretching)
+        except ValueError as e:
+            raise InputError(f"stretching: {e}") from None
+    if args.gravity is not None:
+        try:
+            gravity = jr.Gravity(args.gravity)
+        except ValueError as e:
+            raise InputError(f"gravity: {e}") from None
+    try:
+        return jr.make_scene(args.psi0, args.gap, args.alpha, alpha_right_deg=args.alpha_right, s0=args.s0,
+                             n=args.n, refine=args.refine, stretching=stretching, gravity=gravity)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+
+
+def _array_leaves(scene):
+    """Python-number leaves -> float64 arrays, so the jitted solver is compiled once per
+    (state, mesh) and reused for every parameter value (and hits JAX's persistent cache)."""
+    import jax.numpy as jnp
+    import jax.tree_util as jtu
+
+    def conv(x):
+        if isinstance(x, (float, int)) and not isinstance(x, bool):
+            return jnp.asarray(x, jnp.float64)
+        return x
+
+    return jtu.tree_map(conv, scene)
+
+
+def _finite(x):
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _result_name(result):
+    import jaxrod as jr
+
+    for name in getattr(jr.RESULTS, "_name_to_item", {}):
+        if bool(result == getattr(jr.RESULTS, name)):
+            return name
+    return "unknown"
+
+
+def _record(eq, state, k=4, angles_deg=None):
+    """Everything the CLI reports about one equilibrium, as JSON-ready Python values.
+
+    `angles_deg` = (psi0, alpha_left, alpha_right) as requested, reported verbatim
+    instead of the radians->degrees round trip of the scene's values.
+
+    When the solve did not succeed (`converged` false) the solver's last iterate is not
+    the requested state, so the observables are `None` (JSON null) and `stable` is false.
+    """
+    import numpy as np
+
+    import jaxrod as jr
+
+    sc = eq.scene
+    message = jr.RESULTS[eq.result]
+    converged = bool(eq.converged)
+    stab = jr.stability(eq, k=k)
+    en = jr.energies(eq)
+    lam = [_finite(v) for v in np.asarray(stab.eigenvalues)]
+    if angles_deg is None:
+        angles_deg = tuple(math.degrees(float(a)) for a in (sc.strip.psi0, sc.clamps.alpha_left,
+                                                             sc.clamps.alpha_right))
+    psi0_deg, aL_deg, aR_deg = (float(a) for a in angles_deg)
+    rec = {
+        "converged": converged,
+        "result": message if message else "successful",
+        "result_code": _result_name(eq.result),
+        "state": state,
+        "psi0_deg": psi0_deg,
+        "gap": float(sc.clamps.gap),
+        "alpha_left_deg": aL_deg,
+        "alpha_right_deg": aR_deg,
+        "s0": float(sc.strip.s0),
+        "n": int(sc.mesh.n),
+        "refine": float(sc.mesh.refine),
+        "stretching": None if sc.stretching is None else float(sc.stretching.stiffness),
+        "gravity": None if sc.gravity is None else float(sc.gravity.g),
+        "fold_height": _finite(jr.fold_height(eq)),
+        "bending_energy": _finite(en["bending"]),
+        "stretching_energy": _finite(en["stretching"]),
+        "gravity_energy": _finite(en["gravity"]),
+        "total_energy": _finite(en["total"]),
+        "compression": _finite(jr.compression(eq)),
+        "min_eigenvalue": lam[0],
+        "eigenvalues": lam,
+        "eigenvalue_parity": [_finite(v) for v in np.asarray(stab.parity)],
+        "num_unstable": int(stab.num_unstable),
+        "stable": bool(stab.stable),
+        "num_steps": int(eq.num_steps),
+    }
+    if not converged:
+        rec.update({key: None for key in _OBSERVABLES})
+        rec["stable"] = False
+    return rec
+
+
+_OBSERVABLES = ("fold_height", "bending_energy", "stretching_energy", "gravity_energy", "total_energy",
+                "compression", "min_eigenvalue", "eigenvalues", "eigenvalue_parity", "num_unstable")
+
+
+def _fmt(x, spec="+.6f"):
+    return "n/a" if x is None else format(x, spec)
+
+
+def _summary(rec):
+    a = (f"alpha = {rec['alpha_left_deg']:g} deg" if rec["alpha_left_deg"] == rec["alpha_right_deg"]
+         else f"alpha_L = {rec['alpha_left_deg']:g} deg, alpha_R = {rec['alpha_right_deg']:g} deg")
+    lines = [
+        f"{rec['state']} state: Psi0 = {rec['psi0_deg']:g} deg, G/L = {rec['gap']:g}, {a}, "
+        f"s0 = {rec['s0']:g}, n = {rec['n']}",
+        f"  result          {rec['result']}",
+    ]
+    if not rec["converged"]:
+        lines[-1] += "  (NOT CONVERGED: no equilibrium reported)"
+        return "\n".join(lines)
+    lines += [
+        f"  fold height     {_fmt(rec['fold_height'])} L",
+        f"  bending energy  {_fmt(rec['bending_energy'], '.6f')} B/L",
+        f"  compression     {_fmt(rec['compression'], '.6f')} B/L^2",
+        "  eigenvalues     " + ", ".join(_fmt(v, ".6g") for v in rec["eigenvalues"])
+        + f"  (parity {', '.join(_fmt(v, '+.2f') for v in rec['eigenvalue_parity'])})",
+        f"  stable          {'yes' if rec['stable'] else 'no'} ({rec['num_unstable']} unstable modes)",
+    ]
+    if rec["stretching"] is not None:
+        lines.insert(4, f"  stretching en.  {_fmt(rec['stretching_energy'], '.6g')} B/L")
+    if rec["gravity"] is not None:
+        lines.insert(4, f"  gravity energy  {_fmt(rec['gravity_energy'], '.6g')} B/L")
+    return "\n".join(lines)
+
+
+def _enable_x64():
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    _compilation_cache(jax)
+
+
+def _compilation_cache(jax):
+    """Reuse compiled code between CLI runs (a snap-angles run spends ~20 s compiling and
+    well under 1 s computing): JAX's persistent cache in JAX_COMPILATION_CACHE_DIR if set,
+    else ~/.cache/jaxrod/xla; JAXROD_NO_CACHE=1 turns it off. Best effort: an unwritable
+    directory only means no cache."""
+    if os.environ.get("JAXROD_NO_CACHE") or os.environ.get("JAX_COMPILATION_CACHE_DIR"):
+        return
+    path = os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "jaxrod", "xla")
+    try:
+        os.makedirs(path, exist_ok=True)
+        jax.config.update("jax_compilation_cache_dir", path)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    except Exception:  # noqa: BLE001 - a cache is an optimization only
+        pass
+
+
+def _cmd_equilibrium(args):
+    scene = make_scene_from_args(args)  # validates before anything is compiled
+    import jaxrod as jr
+
+    eq = jr.initial_state(_array_leaves(scene), args.state)
+    a_r = args.alpha if args.alpha_right is None else args.alpha_right
+    rec = _record(eq, args.state, angles_deg=(args.psi0, args.alpha, a_r))
+    if args.plot:
+        try:
+            jr.plot_equilibria([eq], [args.state], args.plot)
+        except OSError as e:
+            raise InputError(f"plot: cannot write {args.plot!r}: {e.strerror or e}") from None
+    if args.json:
+        print(json.dumps(rec))
+    else:
+        print(_summary(rec))
+        if args.plot:
+            print(f"  plot            {args.plot}")
+    return EXIT_OK if rec["converged"] else EXIT_NOT_CONVERGED
+
+
+def _cmd_snap_angles(args):
+    scene = make_scene_from_args(args)
+    import numpy as np
+
+    import jaxrod as jr
+
+    scene = _array_leaves(scene)
+    if args.extrapolate:
+        x = jr.snap_angles_extrapolated(scene)
+        r = x.fine
+    else:
+        x = None
+        r = jr.snap_angles(scene)
+
+    def val(x, deg=False):
+        x = float(x)
+        if not np.isfinite(x):
+            return None
+        return float(np.degrees(x)) if deg else x
+
+    rec = {"psi0_deg": args.psi0, "gap": args.gap, "s0": args.s0, "n": args.n, "refine": args.refine,
+           "extrapolated": bool(args.extrapolate)}
+    if x is not None:
+        rec["n_fine"] = x.n_fine
+    for name, path in (("up", r.up), ("down", r.down)):
+        e = None if x is None else getattr(x, name)
+        rec[f"alpha_c_{name}_deg"] = val(path.alpha_c if e is None else e.alpha_c, deg=True)
+        rec[f"kind_{name}"] = jr.KIND_NAMES[int(path.kind)]
+        rec[f"fold_height_before_{name}"] = val(path.fold_height_before if e is None else e.fold_height_before)
+        rec[f"fold_height_after_{name}"] = val(path.fold_height_after if e is None else e.fold_height_after)
+        rec[f"start_{name}"] = _result_name(path.start_result if e is None else e.start_result)
+        rec[f"result_{name}"] = _result_name(path.result if e is None else e.result)
+        if e is not None:
+            rec[f"alpha_c_{name}_deg_n"] = val(e.alpha_c_coarse, deg=True)
+            rec[f"alpha_c_{name}_deg_n_fine"] = val(e.alpha_c_fine, deg=True)
+            rec[f"error_estimate_{name}_deg"] = val(e.error, deg=True)
+            rec[f"meshes_consistent_{name}"] = bool(e.consistent)
+    # any code but success (an unknown outcome, a substituted start, a state through itself,
+    # meshes that disagree, no derivative) is printed and ends with EXIT_NOT_CONVERGED
+    codes = [rec[f"{k}_{name}"] for k in ("result", "start") for name in ("up", "down")]
+    failed = [c for c in codes if c != "successful"]
+    if args.json:
+        print(json.dumps(rec))
+    else:
+        for name in ("up", "down"):
+            a = rec[f"alpha_c_{name}_deg"]
+            res = rec[f"result_{name}"]
+            if a is None:
+                text = "does not snap" if res == "successful" else f"unknown ({res})"
+            else:
+                fa = rec[f"fold_height_after_{name}"]
+                text = (f"alpha_c = {a:+.6f} deg ({rec[f'kind_{name}']}), fold height "
+                        f"{rec[f'fold_height_before_{name}']:+.4f} -> "
+                        + (f"{fa:+.4f}" if fa is not None else f"unknown ({res})"))
+            print(f"snap {name:<4}: " + text)
+    if failed:
+        print(f"jaxrod snap-angles: path result {', '.join(sorted(set(failed)))} (see jaxrod.RESULTS)",
+              file=sys.stderr)
+        return EXIT_NOT_CONVERGED
+    return EXIT_OK
+
+
+def _table(recs):
+    head = f"{'state':<6} {'fold height':>12} {'bending E':>11} {'compression':>12} {'min eig':>10} {'stable':>7}"
+    rows = [head, "-" * len(head)]
+    for r in recs:
+        rows.append(f"{r['state']:<6} {_fmt(r['fold_height'], '+12.5f')} {_fmt(r['bending_energy'], '11.5f')} "
+                    f"{_fmt(r['compression'], '12.5f')} {_fmt(r['min_eigenvalue'], '10.5f')} "
+                    f"{'yes' if r['stable'] else 'no':>7}" + ("" if r["converged"] else f"  ({r['result']})"))
+    return "\n".join(rows)
+
+
+def _cmd_demo(args):
+    import jaxrod as jr
+
+    out = args.out
+    try:
+        os.makedirs(out, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"out: cannot create directory {out!r}: {e.strerror or e}") from None
+    scene = _array_leaves(jr.make_scene(DEFAULTS["psi0"], DEFAULTS["gap"], DEFAULTS["alpha"], s0=DEFAULTS["s0"],
+                                        n=DEFAULTS["n"]))
+    states = ("up", "down")
+    try:
+        from tqdm import tqdm
+
+        it = tqdm(states, desc="solving", unit="state", file=sys.stderr, leave=False, disable=None)
+    except ImportError:
+        it = states
+    eqs, recs = [], []
+    for st in it:
+        if hasattr(it, "set_postfix_str"):
+            it.set_postfix_str(st)
+        eq = jr.initial_state(scene, st)
+        eqs.append(eq)
+        recs.append(_record(eq, st, angles_deg=(DEFAULTS["psi0"], DEFAULTS["alpha"], DEFAULTS["alpha"])))
+    png = os.path.join(out, "equilibria.png")
+    js = os.path.join(out, "equilibria.json")
+    jr.plot_equilibria(eqs, list(states), png)
+    with open(js, "w") as f:
+        json.dump({"jaxrod_version": jr.__version__, "units": "L = B = lambda = 1, angles in degrees",
+                   "equilibria": recs}, f, indent=2)
+        f.write("\n")
+    print("jaxrod demo: creased strip, Psi0 = 60 deg, G/L = 0.5, s0 = 0.02, alpha = 0, n = 100 (L = B = 1)")
+    print(_table(recs))
+    print(f"wrote {png}")
+    print(f"wrote {js}")
+    return EXIT_OK if all(r["converged"] for r in recs) else EXIT_NOT_CONVERGED
+
+
+def main(argv=None):
+    """Entry point of the `jaxrod` console script. Returns the exit code.
+
+    `argv` defaults to `sys.argv[1:]`. Without a subcommand (`jaxrod`, `jaxrod --out DIR`)
+    runs `demo`.
+    """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or (argv[0].startswith("-") and argv[0] not in ("-h", "--help", "--version")):
+        argv = ["demo", *argv]
+    with warnings.catch_warnings():
+        _quiet()
+        try:
+            args = _build_parser().parse_args(argv)
+            _enable_x64()  # before anything is computed
+            if args.command == "equilibrium":
+                return _cmd_equilibrium(args)
+            if args.command == "snap-angles":
+                return _cmd_snap_angles(args)
+            if getattr(args, "handler", None) is not None:
+                return args.handler(args)
+            return _cmd_demo(args)
+        except InputError as e:
+            print(f"jaxrod: error: {e}", file=sys.stderr)
+            return EXIT_USAGE
+        except KeyboardInterrupt:
+            print("jaxrod: interrupted", file=sys.stderr)
+            return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,20 @@
+"""Motion: the strip's equations of motion, integrators, scenes and the snap speed.
+
+Lagrange's equations of the discrete strip with its inextensible links (`simulate`, RATTLE
+by default, any diffrax solver), clamp programs (`Protocol`), dissipation (`Dissipation`),
+the ready-made scenes (`snap_dynamics`: brink, ramp, asymmetric) and the snap speed of a
+design (`snap_speed`).
+
+Layer: above branches (a brink starts from a snap angle); below design.
+"""
+
+from ._equations import Dissipation as Dissipation
+from ._equations import Protocol as Protocol
+from ._scenes import brink as brink
+from ._scenes import ramp as ramp
+from ._scenes import snap_dynamics as snap_dynamics
+from ._scenes import Start as Start
+from ._simulate import simulate as simulate
+from ._simulate import Trajectory as Trajectory
+from ._snap_speed import snap_speed as snap_speed
+from ._simulate import SOLVERS as SOLVERS

@@ -1,0 +1,179 @@
+r"""Snap scenes: where a dynamic run starts and how the clamps move.
+
+* **brink**: the critical state of the quasi-static path (`jr.snap_angles`:
+  `theta_before`, `alpha_c`), the clamps held at $\alpha_c+\delta\alpha$ (`past`, in the
+  snapping direction) and the angles nudged by `nudge` (rad, max-norm) along the unstable
+  mode (the lowest eigenvector of the constrained Hessian, sign chosen so the fold moves
+  toward the other state), projected back onto the end condition
+  $\sum_ih_i\mathbf t_i=(G,0)$ by Gauss-Newton.
+* **ramp**: a stable state at $\alpha_0$ (`jr.initial_state` then the clamps ramped at
+  `rate` rad/T from rest through $\alpha_c$; symmetric by default.
+* **asymmetric**: the left clamp held at its angle, only the right one ramped (the paper's
+  Fig. 4).
+
+A symmetric ramp from a mirror-symmetric state never leaves it at a *branch point* (an
+asymmetric mode going unstable): nothing but round-off seeds that mode, so the departure is
+delayed by ~40 e-foldings of its slow growth. `seed` adds an imperfection of that amplitude
+(rad, max-norm), the mirror-breaking shape $\delta\theta(s)=\sin(\pi s/L)$ (even about
+$L/2$, while symmetric states have $\theta(s)=-\theta(L-s)$), projected onto the end
+condition, as real strips have; it is harmless at a fold.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ._equations import Protocol, check_run_settings
+from ..energy.geometry import discretize
+from ..statics import solve_equilibrium
+from ..statics import initial_state
+from ..linalg.batched import solve2
+from .._misc import check_param
+from ..branches import snap_angles
+from ..results import RESULTS
+from ..statics import stability
+
+
+class Start(eqx.Module):
+    """Initial condition of a run: `scene` (clamps at their t = 0 angles), `theta0`,
+    `protocol`, `direction` (+1 snap up, -1 down), `alpha_c` (rad, NaN if unknown),
+    `bending_before` (bending energy of the critical / start state), `ok` (the statics
+    found the state)."""
+
+    scene: object
+    theta0: jax.Array
+    protocol: Protocol
+    direction: float = eqx.field(static=True)
+    alpha_c: jax.Array
+    bending_before: jax.Array
+    ok: jax.Array
+
+
+def project(theta, scene, steps=8):
+    r"""Minimal-norm Gauss-Newton projection onto $\sum_i h_i\mathbf t_i=(G,0)$."""
+    d = discretize(scene)
+    target = jnp.stack([scene.clamps.gap, jnp.zeros((), theta.dtype)])
+
+    def body(_, th):
+        c = jnp.stack([jnp.sum(d.h * jnp.cos(th)), jnp.sum(d.h * jnp.sin(th))]) - target
+        A = jnp.stack([-d.h * jnp.sin(th), d.h * jnp.cos(th)])
+        return th - A.T @ solve2(A @ A.T, c)
+
+    return jax.lax.fori_loop(0, steps, body, theta)
+
+
+def mirror_seed(theta, scene, seed):
+    """`theta` plus `seed` times the mirror-breaking shape sin(pi s / L) at the segment
+    midpoints, projected onto the end condition (see the module docstring)."""
+    d = discretize(scene)
+    s_mid = jnp.cumsum(d.h) - 0.5 * d.h
+    return project(theta + seed * jnp.sin(jnp.pi * s_mid / jnp.sum(d.h)), scene)
+
+
+def _direction(direction):
+    if direction not in ("up", "down"):
+        raise ValueError(f"direction must be 'up' or 'down', got {direction!r}")
+    return 1.0 if direction == "up" else -1.0
+
+
+def brink(scene, direction="up", *, nudge=1e-3, past=1e-3, snap=None) -> Start:
+    """The brink scene (see the module docstring). `snap`: a precomputed
+    `jr.snap_angles(scene)` to reuse."""
+    sgn = _direction(direction)
+    check_param("nudge", nudge, lo=0.0)
+    check_param("past", past, lo=0.0, lo_open=False)
+    snap = snap_angles(scene) if snap is None else snap
+    path = snap.up if sgn > 0 else snap.down
+    from .._misc import is_concrete
+
+    if is_concrete(path.snaps) and not bool(path.snaps):
+        raise ValueError(f"direction: the quasi-static {direction} path of this scene does not snap "
+                         "(jr.snap_angles found no loss of stability), so there is no brink")
+    a = path.alpha_c + sgn * past
+    sc = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene,
+                     (path.alpha_c, path.alpha_c))
+    eq = solve_equilibrium(sc, path.theta_before, path.force_before)
+    st = stability(eq, k=1)
+    v = st.modes[:, 0]
+    d = discretize(sc)
+    k = sc.mesh.n // 2
+    dy = jnp.sum((d.h * jnp.cos(eq.theta) * v)[:k])  # first-order change of the fold height
+    v = v * jnp.where(sgn * dy >= 0, 1.0, -1.0) / jnp.max(jnp.abs(v))
+    sc_run = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (a, a))
+    theta0 = project(eq.theta + nudge * v, sc_run)
+    from ..statics import bending_energy
+
+    return Start(sc_run, theta0, Protocol(a, a), sgn, path.alpha_c, bending_energy(eq),
+                 path.snaps & (eq.result == RESULTS.successful))
+
+
+def ramp(scene, direction="up", *, rate=0.5, alpha_start=None, right_only=False, snap=None,
+         seed=0.0) -> Start:
+    r"""The ramp scene: start at rest in the stable state opposite to `direction` with the
+    clamps at `alpha_start` (rad; default $\alpha_c-2^\circ$ in the snapping direction, from
+    `jr.snap_angles`), then rotate at `rate` (rad/T, > 0; sign from `direction`). With
+    `right_only=True` only the right clamp turns (the left stays at its angle in `scene`
+    when `alpha_start` is given, else at 0). `seed` (rad, >= 0): the mirror-breaking
+    imperfection of the start (module docstring; 0 keeps the exact equilibrium)."""
+    sgn = _direction(direction)
+    check_param("rate", rate, lo=0.0)
+    check_param("seed", seed, lo=0.0, lo_open=False)
+    if alpha_start is not None:
+        check_param("alpha_start", alpha_start)
+    alpha_c = jnp.nan
+    if alpha_start is None:
+        if right_only:
+            raise ValueError("alpha_start: give the starting right-clamp angle for an asymmetric ramp")
+        snap = snap_angles(scene) if snap is None else snap
+        path = snap.up if sgn > 0 else snap.down
+        alpha_c = path.alpha_c
+        alpha_start = alpha_c - sgn * 2.0 * math.pi / 180.0
+    aL = scene.clamps.alpha_left if right_only else alpha_start
+    sc = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene,
+                     (jnp.asarray(aL, float), jnp.asarray(alpha_start, float)))
+    eq = initial_state(sc, "down" if sgn > 0 else "up")
+    from ..statics import bending_energy
+
+    rl = 0.0 if right_only else sgn * rate
+    theta0 = eq.theta if (isinstance(seed, (int, float)) and seed == 0) else mirror_seed(eq.theta, sc, seed)
+    return Start(sc, theta0, Protocol(aL, alpha_start, rl, sgn * rate), sgn, alpha_c,
+                 bending_energy(eq), eq.result == RESULTS.successful)
+
+
+def snap_dynamics(scene, direction="up", *, kind="brink", nudge=1e-2, past=1e-3, rate=0.5,
+                  alpha_start=None, snap=None, seed=0.0, **simulate_kwargs):
+    """One dynamic snap: build the `kind` scene ("brink", "ramp" or "asymmetric", see the
+    module docstring; `seed` for the ramps) and integrate it with [`jaxrod.simulate`][].
+    Returns (start, trajectory)."""
+    from ._simulate import simulate
+
+    # every setting before any statics are solved (the start state costs a snap_angles)
+    if kind not in ("brink", "ramp", "asymmetric"):
+        raise ValueError(f"kind must be 'brink', 'ramp' or 'asymmetric', got {kind!r}")
+    _direction(direction)
+    check_param("nudge", nudge, lo=0.0)
+    check_param("past", past, lo=0.0, lo_open=False)
+    check_param("rate", rate, lo=0.0)
+    check_param("seed", seed, lo=0.0, lo_open=False)
+    if alpha_start is not None:
+        check_param("alpha_start", alpha_start)
+    names = inspect.signature(check_run_settings).parameters
+    check_run_settings(**{k: v for k, v in simulate_kwargs.items() if k in names})
+    if kind == "brink":
+        start = brink(scene, direction, nudge=nudge, past=past, snap=snap)
+    elif kind == "ramp":
+        start = ramp(scene, direction, rate=rate, alpha_start=alpha_start, snap=snap, seed=seed)
+    elif kind == "asymmetric":
+        start = ramp(scene, direction, rate=rate, alpha_start=0.0 if alpha_start is None else alpha_start,
+                     right_only=True, seed=seed)
+        simulate_kwargs.setdefault("stop_at_snap", False)
+    else:
+        raise ValueError(f"kind must be 'brink', 'ramp' or 'asymmetric', got {kind!r}")
+    simulate_kwargs.setdefault("direction", start.direction)
+    traj = simulate(start.scene, start.theta0, start.protocol, **simulate_kwargs)
+    return start, traj

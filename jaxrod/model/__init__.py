@@ -1,0 +1,13 @@
+"""What the strip is: its material and crease (`Strip`), mesh (`Mesh`), clamps (`Clamps`),
+optional stretching and gravity, and the `Scene` that bundles them (`make_scene`).
+
+The bottom layer: it imports nothing else from jaxrod.
+"""
+
+from ._scene import Clamps as Clamps
+from ._scene import Gravity as Gravity
+from ._scene import make_scene as make_scene
+from ._scene import Mesh as Mesh
+from ._scene import Scene as Scene
+from ._scene import Stretching as Stretching
+from ._scene import Strip as Strip

@@ -1,0 +1,11 @@
+"""Figures: shapes, equilibria, hysteresis loops, phase diagrams, snaps and their animations.
+
+Sits on top of the solver (it reads its results); nothing below imports it.
+"""
+
+from ._dynamics import animate_snap as animate_snap
+from ._dynamics import plot_snap as plot_snap
+from ._statics import plot_equilibria as plot_equilibria
+from ._statics import plot_hysteresis as plot_hysteresis
+from ._statics import plot_phase_diagram as plot_phase_diagram
+from ._statics import plot_shape as plot_shape

@@ -1,0 +1,307 @@
+r"""Equilibria by Newton's method on the autodiff Hessian of $\tilde{\mathcal L}(\theta,\mu)$.
+
+Each iteration solves the KKT system $\mathsf K\,(p,q) = -\nabla\tilde{\mathcal L}$ with
+the bordered tridiagonal structure of `kkt.py` in $O(N)$.
+
+With `minimize=True` (default) the iteration is globalized so it reaches a local
+minimum from a rough guess, not a saddle:
+* inertia correction: if the constrained Hessian has $\nu(0)>0$ negative eigenvalues,
+  $\delta\,I$ is added to the $\theta\theta$ block, with the smallest $\delta$ of a
+  geometric ladder that makes $\nu(-\delta)=0$ (one vectorized Sturm count for the whole
+  ladder);
+* backtracking on the augmented-Lagrangian merit
+  $\phi(\theta)=\tilde{\mathcal L}(\theta,\mu^+) + \tfrac\rho2|\nabla_\mu\tilde{\mathcal L}(\theta,\mu^+)|^2$,
+  where a full step that halves the KKT residual is always accepted; $\rho$ is raised
+  within an iteration where needed to make the Newton direction a descent direction.
+
+With `minimize=False` it is plain Newton (for following unstable branches).
+
+Derivatives of the solution with respect to any float leaf of the scene are by the
+implicit function theorem (one extra structured solve, `lax.custom_linear_solve`),
+never by unrolling the iterations.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.tree_util as jtu
+from jax import lax
+
+from ..linalg import kkt
+from ..energy.geometry import discretize, scene_dtype
+from ..energy.lagrangian import lagrangian
+from .._misc import check_bool, check_int, check_number, run_if
+from ..results import RESULTS
+from ._solution import Equilibrium
+
+
+class Newton(eqx.Module):
+    """Newton settings.
+
+    **Arguments:**
+    - `max_steps`: iteration cap (the `max_steps_reached` code beyond it).
+    - `gtol`: convergence when $\\max_i|\\partial\\tilde{\\mathcal L}/\\partial\\theta_i|\\,L/B$
+      and $\\max|\\partial\\tilde{\\mathcal L}/\\partial\\mu|/L$ are below it. Default:
+      `1e-9` in float64, `1e-3` in float32.
+    - `minimize`: globalize toward a local minimum (inertia correction + line search).
+    - `max_backtracks`: line-search halvings before `line_search_failed`.
+    """
+
+    max_steps: int = eqx.field(static=True, default=100)
+    gtol: float | None = eqx.field(static=True, default=None)
+    minimize: bool = eqx.field(static=True, default=True)
+    max_backtracks: int = eqx.field(static=True, default=30)
+
+    def __check_init__(self):
+        check_int("max_steps", self.max_steps, lo=1)
+        if self.gtol is not None:
+            check_number("gtol", self.gtol, lo=0.0)
+        check_bool("minimize", self.minimize)
+        check_int("max_backtracks", self.max_backtracks, lo=0)
+
+
+def float_scene(scene):
+    dtype = scene_dtype(scene)
+    return jtu.tree_map(lambda x: jnp.asarray(x, dtype) if eqx.is_array_like(x) else x, scene)
+
+
+def _grad_fn(scene):
+    d = discretize(scene)
+    return lambda t, m: jax.grad(lagrangian, argnums=(0, 1))(t, m, scene, d)
+
+
+def _residual(g, scene):
+    st = scene.strip
+    rt = jnp.max(jnp.abs(g[0])) * st.length / st.bending_stiffness
+    rm = jnp.max(jnp.abs(g[1])) / st.length
+    return jnp.maximum(rt, rm)
+
+
+MAX_ANGLE_STEP = 0.5  # rad
+_DELTAS = 10.0 ** jnp.arange(-8, 5)  # inertia-correction ladder, relative to max|diag T|
+
+
+def _newton(scene, theta0, mu0, solver: Newton):
+    dtype = theta0.dtype
+    gtol = solver.gtol if solver.gtol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
+    d = discretize(scene)
+    grad_fn = _grad_fn(scene)
+    st = scene.strip
+    rho = 100.0 * st.bending_stiffness / st.length**3
+
+    def L(t, m):
+        return lagrangian(t, m, scene, d)
+
+    def penalty(t, m):
+        gm = jax.grad(lagrangian, argnums=1)(t, m, scene, d)
+        return 0.5 * jnp.sum(gm**2)
+
+    def cond(c):
+        return ~c["done"]
+
+    def body(c):
+        t, m = c["theta"], c["mu"]
+        g = grad_fn(t, m)
+        res = _residual(g, scene)
+        def work():
+            K = kkt.structured(t, m, scene, d)
+            if solver.minimize:
+                # eigenvalues must exceed a small positive floor: a nearly singular
+                # Hessian (a critical state) would otherwise give a huge, useless step
+                scale = jnp.max(jnp.abs(K.diag))
+                floor = 1e-8 * scale
+
+                def ladder(K, scale, floor):
+                    # the smallest rung delta with nu(floor - delta) = 0 (else the last), one
+                    # rung after the other: the same counts as one 13-shift Sturm count, but
+                    # under `vmap` each rung is one small batched solve per member instead of a
+                    # 13x wider one (which went to `jaxrod.linalg.batched`'s slow pivoting scan)
+                    deltas = scale * _DELTAS.astype(dtype)
+
+                    def ok_at(j):
+                        return kkt.count_below(K, (floor - deltas[j])[None])[0] == 0
+
+                    def more(c):
+                        return ~c[1] & (c[0] < deltas.shape[0] - 1)
+
+                    j, _ = lax.while_loop(more, lambda c: (c[0] + 1, ok_at(c[0] + 1)),
+                                          (jnp.zeros((), jnp.int32), ok_at(0)))
+                    return deltas[j]
+
+                # the ladder of shifts is only needed away from a local minimum; `run_if`, not
+                # `lax.cond`: under `vmap` a cond would run the 13-shift ladder for every member
+                # at every iteration (a batched tridiagonal solve per shift: it dominated the
+                # vmapped phase diagram)
+                is_min = kkt.count_below(K, jnp.full((1,), floor, dtype))[0] == 0
+                delta = run_if(~is_min, ladder, jnp.zeros((), dtype), (K, scale, floor))
+            else:
+                delta = jnp.zeros((), dtype)
+            p, q = kkt.solve(K, -g[0], -g[1], shift=-delta)
+            # cap the angle update at MAX_ANGLE_STEP rad (inactive near convergence)
+            cap = jnp.minimum(1.0, MAX_ANGLE_STEP / jnp.maximum(jnp.max(jnp.abs(p)), 1e-300))
+            cap = jnp.where(jnp.isfinite(cap), cap, 1.0)
+            p, q = cap * p, cap * q
+            if solver.minimize:
+                # The penalty rho is raised for this iteration where the Newton direction
+                # would not descend the merit: with phi = L + rho P, P = |grad_mu L|^2 / 2,
+                # the slope is L' + rho P' and P' ~ -|c|^2 < 0 along a Newton step, so
+                # rho >= 2 max(L', 0) / (-P') + rho_0 makes it <= -|L'| - rho_0 |P'|. Needed
+                # where the force changes a lot while the end condition is nearly met
+                # (the landing after a snap of a shallow arch: |q| ~ 1e2, |c| ~ 1e-3).
+                lag0, slope_l = jax.jvp(L, (t, m), (p, q))
+                pen0, slope_p = jax.jvp(penalty, (t, m), (p, q))
+                need = 2.0 * jnp.maximum(slope_l, 0.0) / jnp.maximum(-slope_p, jnp.finfo(dtype).tiny) + rho
+                rho_it = jnp.where(slope_p < 0.0, jnp.maximum(rho, need), rho)
+                rho_it = jnp.where(jnp.isfinite(rho_it), rho_it, rho)
+                f0 = lag0 + rho_it * pen0
+                slope = jnp.minimum(slope_l + rho_it * slope_p, 0.0)
+
+                def accept(step):
+                    f = L(t + step * p, m + step * q) + rho_it * penalty(t + step * p, m + step * q)
+                    armijo = f <= f0 + 1e-4 * step * slope
+                    return jnp.isfinite(f) & armijo
+
+                full_res = _residual(grad_fn(t + p, m + q), scene)
+                full_ok = (full_res <= 0.5 * res) & jnp.isfinite(full_res)
+
+                # The Armijo test is carried as a flag, never re-evaluated in `ls_cond`: under
+                # `vmap` the loop condition is recomputed inside the body, and a differently
+                # fused copy of `merit` can round the other way when f == f0 (a converged
+                # iterate), so the loop would run forever without updating that member.
+                def ls_cond(s):
+                    step, k, ok = s
+                    return (~ok) & (k < solver.max_backtracks)
+
+                def ls_body(s):
+                    step, k, _ = s
+                    return 0.5 * step, k + 1, accept(0.5 * step)
+
+                one = jnp.ones((), dtype)
+                step, k, _ = lax.cond(
+                    full_ok,
+                    lambda: (one, jnp.zeros((), jnp.int32), jnp.ones((), bool)),
+                    lambda: lax.while_loop(ls_cond, ls_body, (one, jnp.zeros((), jnp.int32), accept(one))),
+                )
+                ls_failed = (k >= solver.max_backtracks) & ~full_ok
+                t_new, m_upd = t + step * p, m + step * q
+            else:
+                ls_failed = jnp.zeros((), bool)
+                t_new, m_upd = t + p, m + q
+            return t_new, m_upd, ls_failed
+
+        # a converged iterate skips the (discarded) Hessian assembly and step
+        t_new, m_upd, ls_failed = lax.cond(res <= gtol, lambda: (t, m, jnp.zeros((), bool)), work)
+        converged = res <= gtol
+        finite = jnp.all(jnp.isfinite(t_new)) & jnp.all(jnp.isfinite(m_upd)) & jnp.isfinite(res)
+        steps = c["steps"] + 1
+        result = RESULTS.where(
+            converged,
+            RESULTS.successful,
+            RESULTS.where(
+                ~finite,
+                RESULTS.nonfinite,
+                RESULTS.where(
+                    ls_failed,
+                    RESULTS.line_search_failed,
+                    RESULTS.where(steps >= solver.max_steps, RESULTS.max_steps_reached, RESULTS.successful),
+                ),
+            ),
+        )
+        stop = converged | ~finite | ls_failed | (steps >= solver.max_steps)
+        keep = converged | ~finite
+        return dict(
+            theta=jnp.where(keep, t, t_new),
+            mu=jnp.where(keep, m, m_upd),
+            steps=jnp.where(converged, c["steps"], steps),
+            done=stop,
+            result=result,
+        )
+
+    init = dict(theta=theta0, mu=mu0, steps=jnp.zeros((), jnp.int32), done=jnp.zeros((), bool),
+                result=RESULTS.successful)
+    out = lax.while_loop(cond, body, init)
+    return out["theta"], out["mu"], out["result"], out["steps"]
+
+
+@jax.custom_jvp
+def _implicit(theta, mu, scene):
+    return theta, mu
+
+
+@_implicit.defjvp
+def _implicit_jvp(primals, tangents):
+    theta, mu, scene = primals
+    _, _, dscene = tangents
+    d_fn = lambda sc: jax.grad(lagrangian, argnums=(0, 1))(theta, mu, sc)  # noqa: E731
+    _, (rt, rm) = jax.jvp(d_fn, (scene,), (dscene,))
+    K = kkt.structured(theta, mu, scene)
+    N = theta.shape[0]
+    # one flat right-hand side: it is then linear in the tangents as a whole, even when
+    # the parameter moves only the theta or only the mu residual (the transpose of
+    # custom_linear_solve needs that)
+    b = -jnp.concatenate([rt, rm])
+
+    def mv(x):
+        return jnp.concatenate(kkt.matvec(K, x[:N], x[N:]))
+
+    def sol(_, r):
+        return jnp.concatenate(kkt.solve(K, r[:N], r[N:]))
+
+    dx = lax.custom_linear_solve(mv, b, sol, symmetric=True)
+    dt, dm = dx[:N], dx[N:]
+    return (theta, mu), (dt, dm)
+
+
+def solve_unflagged(scene, theta0, mu0, solver):
+    scene = float_scene(scene)
+    dtype = scene_dtype(scene)
+    theta0 = jnp.asarray(theta0, dtype)
+    mu0 = jnp.zeros(2, dtype) if mu0 is None else jnp.asarray(mu0, dtype)
+    if theta0.shape != (scene.mesh.n,):
+        raise ValueError(f"theta0 must have shape ({scene.mesh.n},), got {theta0.shape}")
+    t, m, result, steps = _newton(lax.stop_gradient(scene), lax.stop_gradient(theta0),
+                                  lax.stop_gradient(mu0), solver)
+    K = kkt.structured(t, m, lax.stop_gradient(scene))
+    nneg = kkt.count_below(K, jnp.zeros(1, dtype))[0]
+    if solver.minimize:
+        result = RESULTS.where((result == RESULTS.successful) & (nneg > 0), RESULTS.converged_to_saddle, result)
+    t, m = _implicit(t, m, scene)
+    return Equilibrium(t, m, result, steps, nneg, scene)
+
+
+def flag_contact(eq):
+    """`eq` with `result` set to `self_intersecting` where it converged to a state that
+    passes through itself (two non-neighbouring segments cross)."""
+    from ..energy.contact import self_intersects
+
+    bad = (eq.result == RESULTS.successful) & self_intersects(eq.theta, eq.scene, force=eq.force)
+    return eqx.tree_at(lambda e: e.result, eq, RESULTS.where(bad, RESULTS.self_intersecting, eq.result))
+
+
+@eqx.filter_jit
+def solve_equilibrium(scene, theta0, mu0=None, *, solver: Newton = Newton(), throw: bool = False) -> Equilibrium:
+    r"""Solve for an equilibrium of `scene` starting from angles `theta0`.
+
+    **Arguments:**
+    - `scene`: a [`jaxrod.Scene`][].
+    - `theta0`: initial segment angles, shape (N,) (for example a previous solution, or
+      [`jaxrod.initial_state`][]).
+    - `mu0`: initial end force (default zero).
+    - `solver`: a [`jaxrod.Newton`][].
+    - `throw`: raise (via `eqx.error_if`) if the result is not `successful`. Keep it
+      `False` under `vmap` and read `eq.result` per member.
+
+    **Returns:** an [`jaxrod.Equilibrium`][]; a converged state that passes through itself
+    (`jaxrod.self_intersects`) is `self_intersecting`. Differentiable with respect to every
+    float leaf of `scene` (implicit function theorem).
+    """
+    if not isinstance(solver, Newton):
+        raise ValueError(f"solver must be a jaxrod.Newton, got {solver!r}")
+    check_bool("throw", throw)
+    eq = flag_contact(solve_unflagged(scene, theta0, mu0, solver))
+    if throw:
+        eq = eqx.tree_at(lambda e: e.theta, eq,
+                         eq.result.error_if(eq.theta, eq.result != RESULTS.successful))
+    return eq

@@ -1,0 +1,143 @@
+r"""Up and down states built on their own, by homotopy from the flat buckled strip.
+
+MODEL.md: the up and down states need not be connected by continuation in alpha, so
+each is built from the flat strip ($\Psi_0=\pi$, $\alpha=0$) buckled up or down at the
+requested gap, then deformed to the requested $(\Psi_0,\alpha_L,\alpha_R)$ (and
+gravity) in `steps` Newton-minimization steps. Three deformation paths are tried at
+once under `vmap` (all parameters together; crease first then clamps; clamps first then
+crease); a path is valid when every step converges to a stable equilibrium whose fold
+height keeps the requested sign and whose angles change by less than pi/2 from the
+previous step (no jump to another branch). The first valid path wins; if none is valid the
+result is `state_not_found` (for example the down state of a tight fold at a large gap,
+which does not exist at $\alpha=0$).
+
+The flat buckled start is $\theta_i=\pm A\sin(2\pi m_i/L)$ with $A$ chosen so that
+$\sum_i h_i\cos\theta_i=G$ exactly; Newton then relaxes it onto the elastica.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from ..energy.geometry import discretize, scene_dtype
+from ..energy.lagrangian import positions
+from ._equilibrium import Newton, float_scene, solve_unflagged, flag_contact
+from .._misc import check_int
+from ..results import RESULTS
+from ._solution import Equilibrium
+
+
+def buckled_guess(scene, up: bool = True):
+    """Sine-shaped first buckling mode meeting the gap exactly: shape (N,)."""
+    scene = float_scene(scene)
+    d = discretize(scene)
+    L = scene.strip.length
+    shape = jnp.sin(2 * jnp.pi * d.mid[1:-1] / L)
+    G = scene.clamps.gap
+
+    def body(_, lh):
+        lo, hi = lh
+        A = 0.5 * (lo + hi)
+        x = jnp.sum(d.h * jnp.cos(A * shape))
+        too_long = x > G  # amplitude too small
+        return jnp.where(too_long, A, lo), jnp.where(too_long, hi, A)
+
+    lo, hi = lax.fori_loop(0, 60, body, (jnp.zeros((), d.h.dtype), jnp.full((), 2.4048, d.h.dtype)))
+    A = 0.5 * (lo + hi)
+    return (1.0 if up else -1.0) * A * shape
+
+
+_MAX_STEP_CHANGE = 0.5 * jnp.pi
+"""Largest change of any angle in one homotopy step along a tracked branch (rad). Valid
+paths change by < 0.5 rad per step (24 steps); lost branches jump by several rad."""
+
+
+def _path_params(kind, u):
+    """Progress of (crease, clamps) along path `kind` at homotopy time u in [0, 1]."""
+    both = u
+    crease_first = (jnp.clip(2 * u, 0, 1), jnp.clip(2 * u - 1, 0, 1))
+    clamps_first = (jnp.clip(2 * u - 1, 0, 1), jnp.clip(2 * u, 0, 1))
+    uc = jnp.select([kind == 0, kind == 1], [both, crease_first[0]], clamps_first[0])
+    ua = jnp.select([kind == 0, kind == 1], [both, crease_first[1]], clamps_first[1])
+    return uc, ua
+
+
+def _deformed(scene, uc, ua):
+    st, cl = scene.strip, scene.clamps
+    psi0 = jnp.pi + uc * (st.psi0 - jnp.pi)
+    scene = eqx.tree_at(lambda s: s.strip.psi0, scene, psi0)
+    scene = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene,
+                        (ua * cl.alpha_left, ua * cl.alpha_right))
+    if scene.gravity is not None:
+        scene = eqx.tree_at(lambda s: s.gravity.g, scene, uc * scene.gravity.g)
+    return scene
+
+
+def _fold_height(theta, mu, scene):
+    return positions(theta, mu, scene)[scene.mesh.n // 2, 1]
+
+
+def still_tracked(eq, sgn, theta_prev, scene):
+    """`eq` (solved on `scene` from `theta_prev`) is still the tracked state: converged,
+    stable, fold height of sign `sgn`, and no angle changed by `_MAX_STEP_CHANGE` or more (a
+    jump means the branch was lost, even when Newton lands on a stable state of the right
+    sign, e.g. one wound into loops)."""
+    return (eq.converged & eq.stable & (sgn * _fold_height(eq.theta, eq.force, scene) > 0)
+            & (jnp.max(jnp.abs(eq.theta - theta_prev)) < _MAX_STEP_CHANGE))
+
+
+@eqx.filter_jit
+def initial_state(scene, state: str = "up", *, steps: int = 24, solver: Newton = Newton()) -> Equilibrium:
+    r"""The stable up (`state="up"`, $y(L/2)>0$) or down (`"down"`) equilibrium of
+    `scene`, built from the flat buckled strip by homotopy (see the module docstring).
+
+    **Returns:** an [`jaxrod.Equilibrium`][] whose `result` is `successful`, or
+    `state_not_found` when no deformation path reaches a stable state of that sign, or
+    `self_intersecting` when the state found passes through itself.
+    """
+    if state not in ("up", "down"):
+        raise ValueError(f"state must be 'up' or 'down', got {state!r}")
+    check_int("steps", steps, lo=1)
+    if not isinstance(solver, Newton):
+        raise ValueError(f"solver must be a jaxrod.Newton, got {solver!r}")
+    return flag_contact(initial_state_signed(scene, 1.0 if state == "up" else -1.0, steps=steps, solver=solver))
+
+
+def initial_state_signed(scene, sgn, *, steps: int = 24, solver: Newton = Newton()) -> Equilibrium:
+    """`initial_state` with the side as a number, +1 up or -1 down (may be traced, e.g.
+    mapped with `lax.map` to build both states through one traced body)."""
+    if not solver.minimize:
+        raise ValueError("initial_state needs a minimizing Newton solver (minimize=True)")
+    scene = float_scene(scene)
+    dtype = scene_dtype(scene)
+    sgn = jnp.asarray(sgn, dtype)
+    target = lax.stop_gradient(scene)
+
+    def run_path(kind):
+        s0 = _deformed(target, jnp.zeros((), dtype), jnp.zeros((), dtype))
+        eq0 = solve_unflagged(s0, sgn * buckled_guess(s0, True), None, solver)
+        ok0 = eq0.converged & eq0.stable & (sgn * _fold_height(eq0.theta, eq0.force, s0) > 0)
+
+        def step(carry, u):
+            t, m, ok = carry
+            uc, ua = _path_params(kind, u)
+            sc = _deformed(target, uc, ua)
+            eq = solve_unflagged(sc, t, m, solver)
+            return (eq.theta, eq.force, ok & still_tracked(eq, sgn, t, sc)), None
+
+        us = jnp.arange(1, steps + 1, dtype=dtype) / steps
+        (t, m, ok), _ = lax.scan(step, (eq0.theta, eq0.force, ok0), us)
+        return t, m, ok
+
+    ts, ms, oks = jax.vmap(run_path)(jnp.arange(3))
+    best = jnp.argmax(oks)
+    found = jnp.any(oks)
+    # final polish on the target scene (also attaches implicit derivatives)
+    eq = solve_unflagged(scene, ts[best], ms[best], solver)
+    good = eq.converged & eq.stable & (sgn * _fold_height(eq.theta, eq.force, eq.scene) > 0)
+    result = RESULTS.where(found & good, eq.result,
+                           RESULTS.where(eq.converged | ~found, RESULTS.state_not_found, eq.result))
+    return eqx.tree_at(lambda e: e.result, eq, result)

@@ -1,0 +1,122 @@
+"""The layers of the house, checked on the source: data flows one way.
+
+    model -> energy -> linalg -> statics -> branches -> dynamics -> design;  plot, cli on top
+
+Every import inside `jaxrod/` and `design/` (installed as `jaxrod.design`) is read from the
+syntax tree, at module level and inside functions alike, and each must (1) go to the same or
+a lower layer, (2) name another subpackage only through its public surface (its `__init__`
+or a public module such as `jaxrod.energy.geometry`), never an underscore module or an
+underscore name of it, and (3) leave the design package out of the core.
+"""
+
+import ast
+import pathlib
+import sys
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+# the shared base (results, _misc, _custom_types and the package root's own files) is layer 0
+RANK = {"model": 1, "energy": 2, "linalg": 3, "statics": 4, "branches": 5, "dynamics": 6, "design": 7,
+        "plot": 8, "cli": 9}
+CORE = {"model", "energy", "linalg", "statics", "branches", "dynamics"}
+
+
+def _modules():
+    for path in sorted((ROOT / "jaxrod").rglob("*.py")):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        yield path, parts
+    for path in sorted((ROOT / "design").rglob("*.py")):
+        yield path, ["jaxrod", "design", *path.relative_to(ROOT / "design").with_suffix("").parts]
+
+
+def _imports(path, parts):
+    """(target module, imported names) for every import of jaxrod in the file."""
+    pkg = parts[:-1] if parts[-1] != "__init__" else parts[:-1]
+    if parts[-1] == "__init__":
+        pkg = parts[:-1]
+    tree = ast.parse(path.read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = pkg[: len(pkg) - (node.level - 1)]
+                mod = base + (node.module.split(".") if node.module else [])
+            else:
+                mod = node.module.split(".")
+            if mod[0] != "jaxrod":
+                continue
+            names = [a.name for a in node.names]
+            # `from jaxrod.linalg import kkt` names a module: treat it as importing that module
+            yield mod, names
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                mod = a.name.split(".")
+                if mod[0] == "jaxrod":
+                    yield mod, []
+
+
+def _layer(mod):
+    return mod[1] if len(mod) > 1 and mod[1] in RANK else None
+
+
+def _violations():
+    out = []
+    for path, parts in _modules():
+        me = _layer(parts)
+        rel = path.relative_to(ROOT)
+        for mod, names in _imports(path, parts):
+            there = _layer(mod)
+            if len(mod) == 1 and me is not None and me not in ("plot", "cli", "design"):
+                out.append(f"{rel}: imports the package root `jaxrod` (a layer must import what it uses directly)")
+            if there is None or there == me:
+                continue
+            if me is not None and RANK[there] > RANK[me]:
+                out.append(f"{rel}: layer {me} imports the higher layer {there} ({'.'.join(mod)})")
+            if me in CORE and there == "design":
+                out.append(f"{rel}: the core imports the design package")
+            if any(p.startswith("_") for p in mod[2:]):
+                out.append(f"{rel}: imports the private module {'.'.join(mod)} of another subpackage")
+            private = [n for n in names if n.startswith("_")]
+            if private:
+                out.append(f"{rel}: imports private names {private} from {'.'.join(mod)}")
+    return out
+
+
+def test_layers_flow_one_way():
+    assert _violations() == []
+
+
+def test_layout_check_catches_a_violation(tmp_path, monkeypatch):
+    """The check itself can fail: a statics module importing a branches private is caught."""
+    fake = tmp_path / "jaxrod" / "statics"
+    fake.mkdir(parents=True)
+    (tmp_path / "design").mkdir()
+    (fake / "_bad.py").write_text("from ..branches._snap import follow_path\nfrom ..branches import _x\n")
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    found = _violations()
+    assert any("higher layer branches" in v for v in found)
+    assert any("private module jaxrod.branches._snap" in v for v in found)
+    assert any("private names ['_x']" in v for v in found)
+
+
+@pytest.mark.parametrize("name", ["model", "energy", "linalg", "statics", "branches", "dynamics", "plot", "cli",
+                                  "design"])
+def test_every_layer_has_a_public_surface_with_a_docstring(name):
+    import importlib
+
+    mod = importlib.import_module(f"jaxrod.{name}")
+    assert mod.__doc__ and len(mod.__doc__.split()) > 10
+
+
+def test_top_level_names_unchanged():
+    """The names `jaxrod` exported before the layers were introduced still resolve."""
+    import jaxrod as jr
+
+    for n in ["RESULTS", "Strip", "Mesh", "Clamps", "Scene", "make_scene", "solve_equilibrium", "Newton",
+              "initial_state", "stability", "snap_angles", "snap_angles_extrapolated", "SnapPath", "KIND_NAMES",
+              "critical_point", "cusp_point", "termination_gap", "continue_branch", "continue_critical",
+              "hysteresis", "HYSTERESIS_BRANCHES", "phase_diagram", "simulate", "snap_dynamics", "snap_speed",
+              "brink", "ramp", "Trajectory", "Dissipation", "Protocol", "clearance", "self_intersects",
+              "plot_shape", "plot_hysteresis", "plot_phase_diagram", "BorderedTridiagonal", "lagrangian",
+              "discretize", "Equilibrium", "ExtrapolatedPath", "refined_scene"]:
+        assert hasattr(jr, n), n
