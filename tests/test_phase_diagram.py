@@ -82,9 +82,22 @@ def test_figure_and_termination_hook(tmp_path, monkeypatch):
     ds = jr.phase_diagram([60.0, 180.0], [0.2, 0.5, 0.8], progress=False)
     png = jr.plot_phase_diagram(ds, str(tmp_path / "pd.png"), termination_gaps={60.0: (0.7, 0.75)})
     assert os.path.getsize(png) > 10_000
-    # the hook: None exactly when the library has no termination_gap
-    monkeypatch.delattr(jr, "termination_gap", raising=False)
-    assert _phase.termination_gaps([60.0]) is None
+    # the figure's vertical lines come from termination_gap, one call per Psi0, with the
+    # caller's s0 and mesh
+    from types import SimpleNamespace
+
+    from jaxrod.branches import _termination
+
+    seen = []
+
+    def fake(psi0, *, s0, n):
+        seen.append((psi0, s0, n))
+        return SimpleNamespace(gap_up=0.7 + psi0 / 1e3, gap_down=0.6 + psi0 / 1e3)
+
+    monkeypatch.setattr(_termination, "termination_gap", fake)
+    assert _phase.termination_gaps([60.0, 90.0], s0=0.03, n=80) == {
+        60.0: (pytest.approx(0.76), pytest.approx(0.66)), 90.0: (pytest.approx(0.79), pytest.approx(0.69))}
+    assert seen == [(60.0, 0.03, 80), (90.0, 0.03, 80)]
 
 
 @pytest.mark.parametrize("argv, name", [
