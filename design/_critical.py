@@ -41,7 +41,8 @@ from jaxrod.linalg import batched
 
 class Critical(eqx.Module):
     """Critical angles (radians; NaN where the path does not snap), snap flags and kinds
-    (0 none, 1 fold, 2 branch point; see `jaxrod.KIND_NAMES`)."""
+    (0 none, 1 fold, 2 branch point; see `jaxrod.KIND_NAMES`), and each path's
+    [`jaxrod.RESULTS`][] code (`result_up`, `result_down`: `SnapPath.result`)."""
 
     alpha_up: jax.Array
     alpha_down: jax.Array
@@ -49,6 +50,8 @@ class Critical(eqx.Module):
     snaps_down: jax.Array
     kind_up: jax.Array
     kind_down: jax.Array
+    result_up: jr.RESULTS
+    result_down: jr.RESULTS
 
 
 def design_scene(psi0, gap, s0, n):
@@ -94,7 +97,14 @@ def critical_angles(psi0, gap, s0, n: int = 40) -> Critical:
     r"""[`Critical`][] angles of the design (Psi0 in radians, G/L, s0/L) on an `n`-segment mesh,
     differentiable in (psi0, gap, s0) (forward and reverse mode; see the module docstring)."""
     r = jr.snap_angles(design_scene(psi0, gap, s0, n))
-    return Critical(r.up.alpha_c, r.down.alpha_c, r.up.snaps, r.down.snaps, r.up.kind, r.down.kind)
+    return Critical(r.up.alpha_c, r.down.alpha_c, r.up.snaps, r.down.snaps, r.up.kind, r.down.kind,
+                    path_code(r.up), path_code(r.down))
+
+
+def path_code(path):
+    """A snap path's verdict for design: its `result`, or its `start_result` where only the
+    start is flagged (a substituted start: an alpha_c of the other half of the loop)."""
+    return jr.RESULTS.where(path.result == jr.RESULTS.successful, path.start_result, path.result)
 
 
 @critical_angles.defjvp
@@ -109,7 +119,10 @@ def _critical_jvp(n, primals, tangents):
         g = critical_sensitivity(path.theta_before, path.force_before, path.alpha_c, p, path.kind, n)
         out.append(path.alpha_c)
         douts.append(jnp.where(path.snaps, jnp.dot(g, dp), 0.0))
-    prim = Critical(out[0], out[1], r.up.snaps, r.down.snaps, r.up.kind, r.down.kind)
-    zero_b = jax.tree.map(lambda a: jnp.zeros(a.shape, jax.dtypes.float0), (r.up.snaps, r.up.kind))
-    tan = Critical(douts[0], douts[1], zero_b[0], zero_b[0], zero_b[1], zero_b[1])
+    codes = (path_code(r.up), path_code(r.down))
+    prim = Critical(out[0], out[1], r.up.snaps, r.down.snaps, r.up.kind, r.down.kind, *codes)
+    zero = lambda a: jnp.zeros(jnp.shape(a), jax.dtypes.float0)  # noqa: E731
+    codes = jax.tree.map(zero, codes)
+    tan = Critical(douts[0], douts[1], zero(r.up.snaps), zero(r.down.snaps), zero(r.up.kind), zero(r.down.kind),
+                   *codes)
     return prim, tan

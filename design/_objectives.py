@@ -49,9 +49,22 @@ class Term(eqx.Module):
     def value(self, ctx):
         raise NotImplementedError
 
+    def code(self, ctx, value):
+        """The [`jaxrod.RESULTS`][] code of `value` (traced): the verdict of what it was
+        computed from. Default: `successful` where the value is finite, else `nonfinite`."""
+        return jr.RESULTS.where(jnp.isfinite(value), jr.RESULTS.successful, jr.RESULTS.nonfinite)
+
     def describe(self):
         return {"name": self.name, "target": self.target, "tol": self.tol, "weight": self.weight,
                 "unit": self.unit}
+
+
+def _first_failure(*codes):
+    """The first of `codes` that is not `successful` (traced), else `successful`."""
+    out = codes[-1]
+    for c in reversed(codes[:-1]):
+        out = jr.RESULTS.where(c != jr.RESULTS.successful, c, out)
+    return out
 
 
 def _check(target, tol, weight):
@@ -75,12 +88,18 @@ class AlphaUp(Term):
     def value(self, ctx):
         return jnp.rad2deg(ctx.critical.alpha_up)
 
+    def code(self, ctx, value):
+        return ctx.critical.result_up
+
 
 class AlphaDown(AlphaUp):
     name = "alpha_c_down"
 
     def value(self, ctx):
         return jnp.rad2deg(ctx.critical.alpha_down)
+
+    def code(self, ctx, value):
+        return ctx.critical.result_down
 
 
 class Hysteresis(AlphaUp):
@@ -89,6 +108,9 @@ class Hysteresis(AlphaUp):
     def value(self, ctx):
         c = ctx.critical
         return jnp.rad2deg(c.alpha_up - c.alpha_down)
+
+    def code(self, ctx, value):
+        return _first_failure(ctx.critical.result_up, ctx.critical.result_down)
 
 
 def _state_name(state):
@@ -111,6 +133,9 @@ class FoldHeight(Term):
 
     def value(self, ctx):
         return jr.fold_height(ctx.equilibrium(self.state, self.alpha_deg))
+
+    def code(self, ctx, value):
+        return ctx.equilibrium(self.state, self.alpha_deg).result
 
     def describe(self):
         return {**super().describe(), "state": self.state, "alpha_deg": self.alpha_deg}
@@ -140,6 +165,9 @@ class Snaps(Term):
     def value(self, ctx):
         c = ctx.critical
         return (c.snaps_up if self.direction == "up" else c.snaps_down).astype(jnp.result_type(float))
+
+    def code(self, ctx, value):
+        return ctx.critical.result_up if self.direction == "up" else ctx.critical.result_down
 
     def describe(self):
         return {**super().describe(), "name": f"snaps_{self.direction}"}
@@ -217,7 +245,8 @@ class Context:
             ok = (start.result == jr.RESULTS.successful) & (eq.result == jr.RESULTS.successful)
             # a missing state makes every observable NaN (an infeasible design), never a wrong state
             nan_theta = jnp.where(ok, eq.theta, jnp.nan)
-            self._eq[key] = eqx.tree_at(lambda e: e.theta, eq, nan_theta)
+            self._eq[key] = eqx.tree_at(lambda e: (e.theta, e.result), eq,
+                                        (nan_theta, _first_failure(start.result, eq.result)))
         return self._eq[key]
 
 
@@ -238,14 +267,16 @@ def term_numbers(terms):
 
 
 def evaluate_terms(terms, psi0, gap, s0, n, numbers=None):
-    """(residuals, values) of `terms` at one design. Constraint terms have no residual; a
-    violated constraint makes every residual NaN (infeasible design). `numbers`: the
-    terms' (target, tol, weight) as a (k, 3) array (default `term_numbers(terms)`); the
-    traced code reads them only from there, so problems that differ only in their targets
-    share one compiled program."""
+    """(residuals, values, codes) of `terms` at one design. Constraint terms have no
+    residual; a violated constraint makes every residual NaN (infeasible design). `codes`
+    (k,): each term's [`jaxrod.RESULTS`][] value (`Term.code`: the verdict of the snap path
+    or state it was computed from). `numbers`: the terms' (target, tol, weight) as a (k, 3)
+    array (default `term_numbers(terms)`); the traced code reads them only from there, so
+    problems that differ only in their targets share one compiled program."""
     ctx = Context(psi0, gap, s0, n)
     numbers = term_numbers(terms) if numbers is None else numbers
     values = jnp.stack([t.value(ctx) for t in terms])
+    codes = jnp.stack([t.code(ctx, values[i])._value.astype(jnp.int32) for i, t in enumerate(terms)])
     res = [jnp.sqrt(numbers[i, 2]) * (values[i] - numbers[i, 0]) / numbers[i, 1]
            for i, t in enumerate(terms) if not t.is_constraint]
     res = jnp.stack(res) if res else jnp.zeros((0,), values.dtype)
@@ -254,7 +285,7 @@ def evaluate_terms(terms, psi0, gap, s0, n, numbers=None):
         if t.is_constraint:
             ok = ok & (values[i] == numbers[i, 0])
     res = jnp.where(ok, res, jnp.nan)
-    return res, values
+    return res, values, codes
 
 
 def energy_released(psi0, gap, s0, n=100, direction="up"):

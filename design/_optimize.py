@@ -30,6 +30,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+import jaxrod as jr
+from jaxrod.results import result_from_name, result_name
+
 from ._objectives import evaluate_terms, term_key, term_numbers
 from ._params import NAMES, Parametrization
 
@@ -76,18 +79,18 @@ class Problem(eqx.Module):
         return evaluate_terms(self.terms, psi0, gap, s0, self.n, self.numbers)
 
     def linearize(self, z):
-        """(r, J, values) at z."""
+        """(r, J, values, codes) at z (codes: each term's `jaxrod.RESULTS` value)."""
         def f(zz):
-            r, v = self.residuals(zz)
-            return r, (r, v)
+            r, v, c = self.residuals(zz)
+            return r, (r, v, c)
 
-        J, (r, v) = jax.jacfwd(f, has_aux=True)(z)
-        return r, J, v
+        J, (r, v, c) = jax.jacfwd(f, has_aux=True)(z)
+        return r, J, v, c
 
 
 @eqx.filter_jit
 def _linearize_batch(problem, z, batch_size=None):
-    """(r, J, values) of every start: the one compiled call per iteration. `batch_size`
+    """(r, J, values, codes) of every start: the one compiled call per iteration. `batch_size`
     None: one `vmap` over all starts; an int: `lax.map` over chunks of that many starts,
     each chunk `vmap`-ed (the same values; bounds the batch that XLA:CPU's batched LAPACK
     kernels see, and the memory)."""
@@ -128,8 +131,8 @@ class _Loop:
         self.problem, self.opt = problem, optimizer
         self.frac, self.gtol, self.max_iter = stop_fraction, gtol, max_iter
         self.batch_size = batch_size
-        r, J, v = (np.asarray(a) for a in _linearize_batch(problem, z0, batch_size))
-        self.z, self.r, self.J, self.values = np.asarray(z0), r, J, v
+        r, J, v, c = (np.asarray(a) for a in _linearize_batch(problem, z0, batch_size))
+        self.z, self.r, self.J, self.values, self.codes = np.asarray(z0), r, J, v, c
         self.loss = _loss(r)
         B = z0.shape[0]
         self.lam = np.full(B, 1e-3)
@@ -157,7 +160,7 @@ class _Loop:
             dz = np.asarray(dz)
         running = self.status == 0
         z_new = self.z + np.where(running[:, None], dz, 0.0)
-        r, J, v = (np.asarray(a) for a in _linearize_batch(self.problem, jnp.asarray(z_new), self.batch_size))
+        r, J, v, c = (np.asarray(a) for a in _linearize_batch(self.problem, jnp.asarray(z_new), self.batch_size))
         loss = _loss(r)
         # LM accepts descent only; optax follows its own trajectory, refusing infeasible iterates
         accept = running & ((loss < self.loss) if self.opt is None else np.isfinite(loss))
@@ -167,6 +170,7 @@ class _Loop:
         self.r = np.where(a1, r, self.r)
         self.J = np.where(accept[:, None, None], J, self.J)
         self.values = np.where(a1, v, self.values)
+        self.codes = np.where(a1, c, self.codes)
         self.loss = np.where(accept, loss, self.loss)
         if opt_state is not None:
             self.opt_state = jax.tree.map(
@@ -186,7 +190,15 @@ class DesignResult(eqx.Module):
     `values` (3,): psi0_deg, gap, s0 of the design; `achieved` (T,): each term's value;
     `targets`, `tols` (T,); `reached`; `loss`; `num_iterations`; `status` (see `STATUS`);
     `history_loss` (I,), `history_values` (I, 3): best-so-far per iteration; `z` the
-    unconstrained vector; `names` the term names, `n` the mesh, `meta` JSON-ready metadata."""
+    unconstrained vector; `names` the term names, `n` the mesh, `meta` JSON-ready metadata;
+    `codes` (T,): each term's [`jaxrod.RESULTS`][] value at the design (the verdict of the
+    snap path or state it was computed from).
+
+    `result` (a `jaxrod.RESULTS` code): `successful` when every target is reached and every
+    term's code is `successful`; `infeasible_start` when the objective was not finite at the
+    start; `target_not_reached` when the optimizer stopped short (`message` names the terms
+    off target); else the first term's code that is not `successful` (a target reached on a
+    path through itself, a substituted start, ...)."""
 
     values: jax.Array
     achieved: jax.Array
@@ -202,6 +214,18 @@ class DesignResult(eqx.Module):
     names: tuple = eqx.field(static=True, default=())
     n: int = eqx.field(static=True, default=40)
     meta: str = eqx.field(static=True, default="{}")
+    codes: jax.Array = None
+
+    @property
+    def result(self):
+        if self.status == "infeasible_start":
+            return jr.RESULTS.infeasible_start
+        if not bool(self.reached):
+            return jr.RESULTS.target_not_reached
+        for c in ([] if self.codes is None else np.asarray(self.codes).tolist()):
+            if int(c) != int(jr.RESULTS.successful._value):
+                return result_from_name(result_name(int(c)))
+        return jr.RESULTS.successful
 
     @property
     def psi0_deg(self):
@@ -228,11 +252,14 @@ class DesignResult(eqx.Module):
 
     def to_dict(self):
         d = {"psi0_deg": self.psi0_deg, "gap": self.gap, "s0": self.s0, "reached": bool(self.reached),
-             "status": self.status, "loss": _f(self.loss), "num_iterations": int(self.num_iterations),
-             "n": self.n, "message": self.message}
-        for nm, a, t in zip(self.names, np.asarray(self.achieved), np.asarray(self.targets)):
+             "status": self.status, "result": result_name(self.result), "loss": _f(self.loss),
+             "num_iterations": int(self.num_iterations), "n": self.n, "message": self.message}
+        codes = [None] * len(self.names) if self.codes is None else np.asarray(self.codes).tolist()
+        for nm, a, t, c in zip(self.names, np.asarray(self.achieved), np.asarray(self.targets), codes):
             d[nm] = _f(a)
             d[f"target_{nm}"] = float(t)
+            if c is not None:
+                d[f"result_{nm}"] = result_name(int(c))
         return d
 
     def save(self, path):
@@ -240,7 +267,8 @@ class DesignResult(eqx.Module):
         meta = {"status": self.status, "names": list(self.names), "n": self.n, "meta": json.loads(self.meta),
                 "shapes": {"achieved": len(self.names),
                            "history": 0 if self.history_loss is None else int(self.history_loss.shape[0]),
-                           "z": 0 if self.z is None else int(self.z.shape[0])},
+                           "z": 0 if self.z is None else int(self.z.shape[0]),
+                           "codes": self.codes is not None},
                 "summary": self.to_dict()}
         eqx.tree_serialise_leaves(str(path) + ".eqx", self)
         with open(str(path) + ".json", "w") as f:
@@ -259,7 +287,8 @@ class DesignResult(eqx.Module):
                    tols=jnp.zeros(T, dt), reached=jnp.zeros((), bool), loss=z,
                    num_iterations=jnp.zeros((), jnp.int32), status=meta["status"],
                    history_loss=jnp.zeros(I, dt), history_values=jnp.zeros((I, 3), dt), z=jnp.zeros(P, dt),
-                   names=tuple(meta["names"]), n=meta["n"], meta=json.dumps(meta["meta"]))
+                   names=tuple(meta["names"]), n=meta["n"], meta=json.dumps(meta["meta"]),
+                   codes=jnp.zeros(T, jnp.int32) if meta["shapes"].get("codes") else None)
         return eqx.tree_deserialise_leaves(str(path) + ".eqx", skel)
 
 
@@ -270,7 +299,8 @@ def _f(x):
 
 class MultiStartResult(eqx.Module):
     """All starts of one run: `best` (a [`DesignResult`][]), the final `values` (B, 3),
-    `losses` (B,), `reached` (B,), `status` (B,) codes into `STATUS`, `num_reached`."""
+    `losses` (B,), `reached` (B,), `status` (B,) codes into `STATUS`, `num_reached`;
+    `result` is the best design's [`DesignResult.result`][]."""
 
     best: DesignResult
     values: jax.Array
@@ -280,6 +310,10 @@ class MultiStartResult(eqx.Module):
     num_reached: int = eqx.field(static=True)
     num_starts: int = eqx.field(static=True)
     wall_time: float = eqx.field(static=True)
+
+    @property
+    def result(self):
+        return self.best.result
 
 
 def optimize(terms, param: Parametrization | None = None, z0=None, *, n: int = 40, optimizer="lm",
@@ -370,7 +404,8 @@ def optimize(terms, param: Parametrization | None = None, z0=None, *, n: int = 4
                         loss=jnp.asarray(losses[b]), num_iterations=jnp.asarray(int(st.it[b]), jnp.int32),
                         status=STATUS[int(status[b])], history_loss=jnp.asarray(H),
                         history_values=jnp.asarray(HV), z=jnp.asarray(st.z[b]),
-                        names=tuple(t.describe()["name"] for t in terms), n=n, meta=json.dumps(meta))
+                        names=tuple(t.describe()["name"] for t in terms), n=n, meta=json.dumps(meta),
+                        codes=jnp.asarray(np.asarray(st.codes)[b], jnp.int32))
     return MultiStartResult(best=best, values=jnp.asarray(values), losses=jnp.asarray(losses),
                             reached=jnp.asarray(reached), status=jnp.asarray(status),
                             num_reached=int(reached.sum()), num_starts=int(z0.shape[0]), wall_time=wall)

@@ -312,8 +312,8 @@ def _polish_psi0(d, terms, param, n, window, xtol):
     def v_at(p):
         z = z_best.copy()
         z[i] = float(param.from_values(psi0_deg=p)[i])
-        r, _, vals = _linearize_batch(problem, jnp.asarray(z)[None], batch)
-        cache[p] = (z, np.asarray(r)[0], np.asarray(vals)[0])
+        r, _, vals, codes = _linearize_batch(problem, jnp.asarray(z)[None], batch)
+        cache[p] = (z, np.asarray(r)[0], np.asarray(vals)[0], np.asarray(codes)[0])
         return float(cache[p][2][0])
 
     p0, v0 = d.psi0_deg, float(np.asarray(d.achieved)[0])
@@ -322,10 +322,11 @@ def _polish_psi0(d, terms, param, n, window, xtol):
     rec = dict(psi0_before=p0, v_s_before=v0, psi0_after=p0, v_s_after=v0, evaluations=evals,
                window_deg=[lo, hi], xtol_deg=xtol)
     if p1 != p0 and v1 > v0:
-        z, r, vals = cache[p1]
+        z, r, vals, codes = cache[p1]
         zj = jnp.asarray(z)
-        d = eqx.tree_at(lambda x: (x.values, x.achieved, x.loss, x.z), d,
-                        (jnp.asarray(param.values(zj)), jnp.asarray(vals), jnp.asarray(0.5 * float(np.sum(r**2))), zj))
+        d = eqx.tree_at(lambda x: (x.values, x.achieved, x.loss, x.z, x.codes), d,
+                        (jnp.asarray(param.values(zj)), jnp.asarray(vals), jnp.asarray(0.5 * float(np.sum(r**2))), zj,
+                         jnp.asarray(codes, jnp.int32)), is_leaf=lambda x: x is None)
         rec.update(psi0_after=float(d.psi0_deg), v_s_after=float(vals[0]))
     return d, rec
 

@@ -19,6 +19,7 @@ if "xla_cpu_multi_thread_eigen" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false").strip()
 
 from .results import RESULTS as RESULTS
+from .results import result_name as result_name
 
 # model: what the strip is
 from .model import Clamps as Clamps

@@ -76,3 +76,42 @@ class RESULTS(eqx.Enumeration):
         "The time integrator failed (diffrax's code is in Trajectory.solver_result): lower the step or "
         "change the solver."
     )
+    end_not_located = (
+        "The exact end of the snapping path (the cusp of its fold pair, or the fold in G of its start state) "
+        "was not solved: G* is the snap criterion's bisection value, which lies up to ~1e-3 in G/L below "
+        "the end and has no derivative. Try another mesh n or a finer tol."
+    )
+    termination_beyond_grid = (
+        "The path still snaps at the largest gap scanned: G* lies above it, and 1.0 is reported. Add gaps "
+        "closer to 1 to the grid to locate it."
+    )
+    target_not_reached = (
+        "The optimizer stopped (a stationary point, no descent direction, or max_iter) before every target "
+        "was within its tolerance; the design's message names the terms off target: try more starts, more "
+        "iterations or wider bounds."
+    )
+    infeasible_start = (
+        "The objective is not finite at the start (the design there does not snap, or its state does not "
+        "exist): start elsewhere."
+    )
+    fold_unresolved = (
+        "The path reached the parameter bound without losing stability at any computed point, but its "
+        "tangent all but turned in alpha on the way (|tau_lam| < jaxrod.branches.NEAR_FOLD): within ~1e-3 in "
+        "G/L of a cusp a fold pair shorter than one continuation step can lie between two computed points, "
+        "so whether the path snaps is unknown. Rerun with a smaller Continuation(ds_max), or use "
+        "termination_gap, which solves the cusp."
+    )
+
+
+def result_name(code) -> str:
+    """The member name of a concrete `RESULTS` code (`"successful"`, `"nonfinite"`, ...)."""
+    value = int(getattr(code, "_value", code))
+    for name, item in RESULTS._name_to_item.items():
+        if int(item._value) == value:
+            return name
+    return "unknown"
+
+
+def result_from_name(name: str):
+    """The `RESULTS` code of a member name (inverse of `result_name`)."""
+    return getattr(RESULTS, name)

@@ -215,3 +215,33 @@ def test_clearance_gradient(up_state, critical_states):
     assert np.all(np.isfinite(grad(eq.theta, eq.scene)))
     for theta in critical_states[1]:
         assert np.all(np.isfinite(grad(theta, critical_states[0])))
+
+
+# ---------------------------------------------------------------- branches through themselves
+
+def test_branch_points_through_themselves_are_flagged():
+    """`continue_branch` checks every point: from the down state at Psi0 = 30 deg, G/L = 0.2
+    (which is clear), alpha increasing to 2.5 rad, the branch turns at folds and comes back
+    through states that cross themselves. `Branch.crossing` equals the numpy crossing check
+    point by point (some points cross, the first ones do not); the branch fills its buffer,
+    so it is `continuation_incomplete`, and had it ended at the bound it would be
+    `self_intersecting`. At G/L = 0.5 up to 1 rad the branch is clear and `successful`."""
+    import equinox as eqx
+
+    settings = jr.Continuation(max_points=120)
+    for gap, bound in ((0.2, 2.5), (0.5, 1.0)):
+        scene = jr.make_scene(psi0_deg=30, gap=gap, n=60)
+        down = jr.initial_state(scene, "down")
+        assert down.result == jr.RESULTS.successful
+        br = jr.continue_branch(scene, down, direction=1.0, bounds=(-bound, bound), settings=settings)
+        h = np.asarray(jr.discretize(scene).h)
+        count = int(br.count)
+        ref = [bool(np_crossings(np_nodes(np.asarray(br.theta[k]), h))) for k in range(count)]
+        assert np.asarray(br.crossing)[:count].tolist() == ref
+        assert not np.any(np.asarray(br.crossing)[count:])
+        if gap == 0.2:
+            assert not ref[0] and 0 < sum(ref) < count and int(br.stop) == 0
+            assert br.result == jr.RESULTS.continuation_incomplete
+            assert eqx.tree_at(lambda b: b.stop, br, jnp.asarray(1, jnp.int32)).result == jr.RESULTS.self_intersecting
+        else:
+            assert not any(ref) and int(br.stop) == 1 and br.result == jr.RESULTS.successful

@@ -96,7 +96,8 @@ def problem():
 
 def test_fold_height_gradient_matches_central_difference(problem):
     z = PARAM.from_values(psi0_deg=70.0, gap=0.5)
-    r, J, v = problem.linearize(z)
+    r, J, v, codes = problem.linearize(z)
+    assert np.all(np.asarray(codes) == int(jr.RESULTS.successful._value))
     Jfd = central_difference(lambda zz: problem.residuals(zz)[0], z)
     assert np.all(np.isfinite(np.asarray(r)))
     np.testing.assert_allclose(np.asarray(J), np.asarray(Jfd), rtol=1e-6, atol=1e-6 * float(jnp.max(jnp.abs(Jfd))))
@@ -179,7 +180,7 @@ def test_psi0_polish_reaches_the_scanned_maximum_on_the_compiled_problem(multist
     assert rec["v_s_after"] >= max(scan) - 0.02 * slope, (rec, max(scan))
     assert rec["v_s_after"] > rec["v_s_before"] + 1e-6  # the fold-target design is not a maximum
     # the returned design is consistent: its values and achieved are those of its z
-    r, _, v = problem.linearize(d.z)
+    r, _, v, _ = problem.linearize(d.z)
     np.testing.assert_allclose(np.asarray(v), np.asarray(d.achieved), rtol=1e-10)
     np.testing.assert_allclose(np.asarray(PARAM.values(d.z)), np.asarray(d.values), rtol=1e-12)
     assert float(d.loss) == pytest.approx(0.5 * float(jnp.sum(r**2)), rel=1e-10)
@@ -192,6 +193,8 @@ def test_unreachable_target_reports_best_and_not_reached():
     assert not bool(b.reached) and res.num_reached == 0
     assert b.message.startswith("target not reached") and "fold_height" in b.message
     assert b.history_loss[-1] <= b.history_loss[0]
+    assert b.result == jr.RESULTS.target_not_reached and res.result == b.result
+    assert b.to_dict()["result"] == "target_not_reached" and b.to_dict()["result_fold_height"] == "successful"
 
 
 def test_optax_optimizer_decreases_the_objective():
@@ -238,6 +241,24 @@ def test_unreachable_snap_angle_gives_clear_message():
     assert "target not reached" in res.best.message and "alpha_c_up" in res.best.message
 
 
+def test_design_carries_the_code_of_its_snap_path():
+    """A target reached on a path that is not `successful` is not a success: at Psi0 = 60
+    deg, G/L = 0.1 the snap-up path's critical state passes through itself
+    (`self_intersecting`); a design that asks for exactly its alpha_c up is reached at once
+    and says `self_intersecting`. At G/L = 0.5 the same request is `successful`."""
+    from jaxrod.design._optimize import _linearize_batch
+
+    param = ds.Parametrization()
+    probe = ds.Problem((ds.AlphaUp(0.0),), param, 40)
+    for (psi0, gap), want in (((60.0, 0.1), "self_intersecting"), ((60.0, 0.5), "successful")):
+        z = param.from_values(psi0_deg=psi0, gap=gap)
+        _, _, v, c = _linearize_batch(probe, z[None], 1)
+        assert jr.results.result_name(int(np.asarray(c)[0, 0])) == want
+        res = ds.optimize((ds.AlphaUp(float(np.asarray(v)[0, 0])),), param, z0=z, n=40, max_iter=1, progress=False)
+        assert bool(res.best.reached)
+        assert jr.results.result_name(res.best.result) == want and res.best.to_dict()["result"] == want
+
+
 @pytest.mark.slow
 def test_critical_angle_gradient_agrees_with_snap_angles_own_derivative():
     # two independent implementations: design's fold / branch-point sensitivity at the
@@ -258,11 +279,11 @@ def test_problems_differing_only_in_targets_share_one_program(problem):
     from jaxrod.design._optimize import _linearize_batch
 
     z = PARAM.from_values(psi0_deg=70.0, gap=0.5)[None]
-    r1, _, v1 = _linearize_batch(problem, z)
+    r1, _, v1, _ = _linearize_batch(problem, z)
     other = ds.Problem((ds.FoldHeight(-0.3, state="down", tol=1e-3, weight=4.0),
                         ds.BendingEnergy(10.0, state="down", tol=0.5)), PARAM, N)
     with count_compiles() as c:
-        r2, _, v2 = _linearize_batch(other, z)
+        r2, _, v2, _ = _linearize_batch(other, z)
     assert c[0] == 0
     np.testing.assert_array_equal(np.asarray(v1), np.asarray(v2))
     v = np.asarray(v2)[0]

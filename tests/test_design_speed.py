@@ -84,7 +84,8 @@ def test_snap_speed_gradient_in_the_design_loop_matches_central_differences():
 
     problem = _study_b_problem(N)
     z0 = problem.param.from_values(psi0_deg=90.0, gap=0.46)
-    r, J, v = (np.asarray(a)[0] for a in _linearize_batch(problem, z0[None]))
+    r, J, v, codes = (np.asarray(a)[0] for a in _linearize_batch(problem, z0[None]))
+    assert codes.tolist() == [int(jr.RESULTS.successful._value)]
     assert math.isfinite(v[0]) and v[0] > 5.0
     fd = []
     for j, h in enumerate((4e-4, 8e-4)):

@@ -25,6 +25,9 @@ def _branch(h, b):
 
 def test_loop_brackets_the_snaps(loop):
     h = loop
+    # no point of any branch passes through itself at G/L = 0.5
+    assert h.result == jr.RESULTS.successful and not bool(jnp.any(h.crossing))
+    assert h.crossing.shape == h.valid.shape
     up, down = float(h.snap.up.alpha_c), float(h.snap.down.alpha_c)
     # branch from the down state, alpha increasing: stable from 0 up to alpha_c_up, unstable after
     a, y, e, nu = _branch(h, 0)

@@ -737,6 +737,9 @@ def prop_vmap(state, members, bad_index, bad):
     if bad != "gap_0.999":  # NaN or G > L: no state (0.999: a valid, nearly straight strip)
         assert not ok(jax.tree.map(lambda x: x[bad_index], eb.result)), \
             f"bad member {bad_index} ({bad}) reported success: {cols}"
+    if bad.startswith("nan_"):  # a NaN parameter is a bad input, not a missing state
+        assert int(codes[bad_index]) == int(jr.RESULTS.nonfinite._value), \
+            f"bad member {bad_index} ({bad}): {msg(jax.tree.map(lambda x: x[bad_index], eb.result))!r}"
 
 
 vmap_members = st.lists(st.fixed_dictionaries(dict(

@@ -12,6 +12,7 @@ import pytest
 
 import jaxrod as jr
 from jaxrod.cli._main import main
+from jaxrod.results import result_name
 
 
 jax.config.update("jax_enable_x64", True)
@@ -86,9 +87,12 @@ def test_reported_gap_is_the_exact_end_where_located():
     an end outside the bracket's reach is not taken."""
     from jaxrod.branches._termination import _exact_end
 
+    codes = []
+
     def res(reason, **kw):
         r = dict(gap=0.6375, bracket=(0.63749, 0.63751), reason=reason, **kw)
         _exact_end(r)
+        codes.append((reason, r["gap_source"], result_name(r["result"])))
         return r["gap"], r["gap_source"], r["gap_criterion"]
 
     assert res("cusp", cusp=0.63852, curve_cusp_gap=0.63851, curve_end_reason="turn") == (
@@ -102,12 +106,80 @@ def test_reported_gap_is_the_exact_end_where_located():
     assert res("start_state_lost") == (0.6375, "bisection", 0.6375)
     assert res("snap_vanishes", cusp=0.63852) == (0.6375, "bisection", 0.6375)
     assert res("never_snaps")[1] == "none"
+    # an end that is a cusp or a lost start state but was not solved is flagged, not successful
+    for reason, source, code in codes:
+        unsolved = reason in ("cusp", "start_state_lost") and source == "bisection"
+        assert code == ("end_not_located" if unsolved else "successful"), (reason, source, code)
+    assert [c for *_, c in codes].count("end_not_located") == 3
+
+
+def _fake_scan(monkeypatch, up, down):
+    """`termination_gap` over a stand-in snap criterion: `up(g)` / `down(g)` give (snaps,
+    result name) at gap g; the path's other outputs are fixed numbers."""
+    from jaxrod.branches import _termination
+
+    def fake(base, psi0, gap):
+        g = float(gap)
+
+        def one(f):
+            snaps, name = f(g)
+            return dict(snaps=snaps, alpha=0.5, kind=2 if snaps else 0, jump=0.5, theta=np.zeros(3),
+                        force=np.zeros(2), mode=np.zeros(3), result=int(getattr(jr.RESULTS, name)._value))
+
+        return dict(up=one(up), down=one(down), has_up=True, has_down=True)
+
+    monkeypatch.setattr(_termination, "_snap_at", fake)
+
+
+def test_termination_codes_follow_the_evaluations(monkeypatch):
+    """Each path's `result` says whether its G* can be trusted: `no_snap` where no gap snaps,
+    `termination_beyond_grid` where the largest gap still snaps, the deciding evaluation's
+    code where "snaps / does not snap" is unknown there (a continuation cut short just above
+    G*, or anywhere above it), `successful` for a branch point's end found to `tol`; the
+    CLI prints the codes and exits 3 on any but `successful` and `no_snap`."""
+    ok = lambda s: (lambda g: (s(g), "successful"))  # noqa: E731
+    _fake_scan(monkeypatch, ok(lambda g: False), ok(lambda g: True))
+    r = jr.termination_gap(60.0, tol=1e-3)
+    assert (result_name(r.result_up), result_name(r.result_down)) == ("no_snap", "termination_beyond_grid")
+    assert math.isnan(r.gap_up) and r.gap_down == 1.0 and r.result == jr.RESULTS.termination_beyond_grid
+    # a branch-point end (kind 2, large jump: "snap_vanishes") located by bisection: trusted
+    _fake_scan(monkeypatch, ok(lambda g: g < 0.62), ok(lambda g: g < 0.3))
+    r = jr.termination_gap(60.0, tol=1e-3)
+    assert r.reason_up == "snap_vanishes" and abs(r.gap_up - 0.62) < 1e-3 and r.result == jr.RESULTS.successful
+    assert r.to_dict()["result_up"] == "successful"
+    # the gap just above G* (its "no snap") was cut short: G* is not known
+    _fake_scan(monkeypatch, lambda g: (g < 0.62, "successful" if g < 0.62 or g > 0.7 else "continuation_incomplete"),
+               ok(lambda g: g < 0.3))
+    r = jr.termination_gap(60.0, tol=1e-3)
+    assert result_name(r.result_up) == "continuation_incomplete" and r.result_down == jr.RESULTS.successful
+    # ... or a gap far above it: the last snap may lie there
+    _fake_scan(monkeypatch, lambda g: (g < 0.62, "landing_failed" if g == 0.9 else "successful"),
+               ok(lambda g: g < 0.3))
+    assert result_name(jr.termination_gap(60.0, tol=1e-3).result_up) == "landing_failed"
+    # a path that never snaps, with states through themselves at the smallest gaps, still never snaps
+    _fake_scan(monkeypatch, lambda g: (False, "self_intersecting" if g < 0.15 else "successful"),
+               ok(lambda g: g < 0.3))
+    assert result_name(jr.termination_gap(60.0, tol=1e-3).result_up) == "no_snap"
+
+def test_cli_prints_termination_codes(monkeypatch, capsys):
+    ok = lambda s: (lambda g: (s(g), "successful"))  # noqa: E731
+    _fake_scan(monkeypatch, ok(lambda g: False), ok(lambda g: g < 0.3))
+    assert main(["termination-gap", "--psi0", "60", "--tol", "1e-3", "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["result_up"] == "no_snap" and rec["result_down"] == "successful"
+    _fake_scan(monkeypatch, lambda g: (g < 0.62, "successful" if g < 0.62 or g > 0.7 else "continuation_incomplete"),
+               ok(lambda g: g < 0.3))
+    assert main(["termination-gap", "--psi0", "60", "--tol", "1e-3"]) == 3
+    out = capsys.readouterr()
+    assert "result continuation_incomplete" in out.out
+    assert out.err.strip() == "jaxrod termination-gap: up: continuation_incomplete (see jaxrod.RESULTS)"
 
 
 def test_cli_flat_json(capsys):
     assert main(["termination-gap", "--psi0", "180", "--json"]) == 0
     rec = json.loads(capsys.readouterr().out)
     assert rec["gap_up"] == 1.0 and rec["gap_down"] == 1.0 and rec["reason_up"] == "flat_strip_never_stops"
+    assert rec["result_up"] == rec["result_down"] == "successful"
 
 
 @pytest.fixture(scope="module")

@@ -5,6 +5,7 @@ its alpha_c has no derivative, and the extrapolated paths carry the codes of bot
 All paths run at N = 100 (one compiled `snap_angles`, shared by every scene here)."""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -52,15 +53,28 @@ def test_fold_with_a_small_jump_is_a_snap(cusp_60):
 
 
 def test_snapping_ends_at_the_cusp(cusp_60):
-    """The down path snaps below the cusp and not above it. At the default step the fold
-    pair is resolved up to 3.4e-4 in G/L below the cusp here (closer, the S the branch
-    makes is shorter than a continuation step; ds_max = 0.05 resolves cusp - 3e-4);
-    `termination_gap` reports the cusp itself."""
+    """The down path snaps below the cusp and not far above it. Within ~1e-3 in G/L of the
+    cusp the S the branch makes can be shorter than a continuation step: there a path that
+    reaches the bound without losing stability but whose tangent all but turned in alpha
+    (|tau_lam| < NEAR_FOLD at a computed point) is `fold_unresolved`, never a successful
+    "no snap": just below the cusp (where the fold pair exists and is stepped over at the
+    default step) and just above it (where it does not). A smaller `ds_max` resolves the
+    fold pair just below the cusp; `termination_gap` reports the cusp itself."""
+    from jaxrod.branches._snap import NEAR_FOLD
+
     below = _snap(60, cusp_60 - 8e-4).down
-    above = _snap(60, cusp_60 + 3e-4).down
     assert bool(below.snaps) and below.result == OK and int(below.kind) == KIND_FOLD
-    assert not bool(above.snaps) and above.result == OK
-    assert np.isnan(float(above.alpha_c)) and np.isnan(float(above.jump))
+    for g in (cusp_60 - 1.5e-4, cusp_60 + 3e-4):
+        p = _snap(60, g).down
+        assert not bool(p.snaps) and p.result == jr.RESULTS.fold_unresolved, (g, jr.RESULTS[p.result])
+        br = jax.tree.map(lambda x: x[0], p.branch)
+        assert 0 < np.min(np.abs(np.asarray(br.tau_lam)[1:int(br.count)])) < NEAR_FOLD
+    far = _snap(60, cusp_60 + 1e-2).down
+    assert not bool(far.snaps) and far.result == OK
+    assert np.isnan(float(far.alpha_c)) and np.isnan(float(far.jump))
+    # the fold pair just below the cusp, resolved with shorter steps
+    fine = _snap(60, cusp_60 - 1.5e-4, settings=jr.Continuation(ds=0.01, ds_max=0.01, max_points=1000)).down
+    assert bool(fine.snaps) and int(fine.kind) == KIND_FOLD and fine.result == OK, jr.RESULTS[fine.result]
 
 
 def test_substituted_start_is_named():
@@ -117,3 +131,17 @@ def test_extrapolated_paths_carry_both_meshes_codes():
     good = jr.snap_angles_extrapolated(sc, polish=False)
     for e in (good.up, good.down):
         assert e.result == OK and e.result_coarse == OK and e.result_fine == OK and bool(e.consistent)
+
+
+@pytest.mark.parametrize("leaf", ["psi0", "gap"])
+def test_nonfinite_parameter_is_named(leaf):
+    """A NaN fold angle or gap (traced past the constructor's checks, as in a batch) gives
+    `nonfinite` on both paths and their starts, never `state_not_found` or a 'no snap'."""
+    sc = jr.make_scene(psi0_deg=60, gap=0.5, n=N)
+    get = {"psi0": lambda s: s.strip.psi0, "gap": lambda s: s.clamps.gap}[leaf]
+    sc = eqx.tree_at(get, sc, jnp.asarray(np.nan))
+    r = jr.snap_angles(sc)
+    for p in (r.up, r.down):
+        assert p.result == jr.RESULTS.nonfinite and p.start_result == jr.RESULTS.nonfinite
+        assert not bool(p.snaps)
+    assert jr.initial_state(sc, "down").result == jr.RESULTS.nonfinite

@@ -34,6 +34,7 @@ from ._phase import phase_diagram as phase_diagram
 from ._phase import termination_gaps as termination_gaps
 from ._snap import follow_path as follow_path
 from ._snap import KIND_NAMES as KIND_NAMES
+from ._snap import NEAR_FOLD as NEAR_FOLD
 from ._snap import snap_angles as snap_angles
 from ._snap import SnapAngles as SnapAngles
 from ._snap import SnapPath as SnapPath

@@ -31,6 +31,7 @@ from jaxtyping import Array
 
 from ..linalg import kkt
 from ..energy.geometry import discretize
+from ..energy.contact import self_intersects
 from ..energy.lagrangian import lagrangian, positions
 from ..statics import float_scene
 from .._misc import check_bool, check_int, check_number, check_sign, is_concrete
@@ -129,7 +130,9 @@ class Branch(eqx.Module):
     component of the unit tangent (its sign change marks a fold), `num_unstable`,
     `fold_height`, `ds` the step that led to each point; `stop` the reason the
     continuation ended (0: buffer full, 1: parameter bound, 2: stability changed,
-    3: step too small)."""
+    3: step too small); `crossing` (M,) whether each point passes through itself
+    (`jaxrod.self_intersects`; False past `count`), or None where the branch was not
+    checked (the stages inside a snap path, which check the states they report)."""
 
     lam: Array
     theta: Array
@@ -140,13 +143,16 @@ class Branch(eqx.Module):
     ds: Array
     count: Array
     stop: Array
+    crossing: Array | None = None
 
     @property
     def result(self):
         """`continuation_incomplete` where the branch stopped on a full buffer (`stop` 0) or a
-        step below `ds_min` (3), else `successful` (the bound, 1, or a loss of stability, 2)."""
+        step below `ds_min` (3); else `self_intersecting` where a point of it passes through
+        itself; else `successful` (the bound, 1, or a loss of stability, 2)."""
+        crossed = jnp.zeros((), bool) if self.crossing is None else jnp.any(self.crossing, axis=-1)
         return RESULTS.where((self.stop == 0) | (self.stop == 3), RESULTS.continuation_incomplete,
-                             RESULTS.successful)
+                             RESULTS.where(crossed, RESULTS.self_intersecting, RESULTS.successful))
 
 
 def _pieces(scene, parameter):
@@ -255,7 +261,7 @@ def _check_bounds(name, bounds):
 @eqx.filter_jit
 def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), *, direction: float = 1.0,
                     bounds=(-jnp.pi, jnp.pi), settings: Continuation = Continuation(),
-                    stop_on_instability: bool = False) -> Branch:
+                    stop_on_instability: bool = False, check_contact: bool = True) -> Branch:
     r"""Follow the branch of equilibria through `eq` as `parameter` varies.
 
     **Arguments:**
@@ -266,6 +272,8 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
     - `bounds`: stop once the parameter leaves this interval.
     - `stop_on_instability`: stop at the first point whose unstable count differs from
       the start's (a snap candidate).
+    - `check_contact`: check every point for self-intersection (`Branch.crossing`; one
+      O(N^2) pass per point after the continuation).
 
     **Returns:** a [`jaxrod.Branch`][].
     """
@@ -274,6 +282,7 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
     if not isinstance(settings, Continuation):
         raise ValueError(f"settings must be a jaxrod.Continuation, got {settings!r}")
     check_bool("stop_on_instability", stop_on_instability)
+    check_bool("check_contact", check_contact)
     scene = lax.stop_gradient(float_scene(scene))
     dtype = eq.theta.dtype
     require_float64(dtype, "continue_branch")
@@ -339,5 +348,9 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
 
     out = lax.while_loop(cond, body, init)
     b = out["buf"]
+    crossing = None
+    if check_contact:
+        crossed = lax.map(lambda tm: self_intersects(tm[0], scene, force=tm[1]), (b["theta"], b["force"]))
+        crossing = crossed & (jnp.arange(M) < out["i"])
     return Branch(b["lam"], b["theta"], b["force"], b["tau_lam"], b["num_unstable"], b["fold_height"], b["ds"],
-                  out["i"], out["stop"])
+                  out["i"], out["stop"], crossing)

@@ -51,7 +51,11 @@ class Hysteresis(eqx.Module):
     - `valid` (4, M): the point belongs to the branch (converged, within `max_unstable`);
     - `snap`: the [`jaxrod.SnapAngles`][] (critical angles, kinds, states before/after);
     - `energy_before_up`, `energy_after_up`, `energy_before_down`, `energy_after_down`:
-      bending energies at the jumps (NaN if that path does not snap).
+      bending energies at the jumps (NaN if that path does not snap);
+    - `crossing` (4, M): the valid point passes through itself (`jaxrod.self_intersects`).
+
+    `result`: the snap-up path's code if it is not successful, else the snap-down's, else
+    `self_intersecting` where a valid point of a branch passes through itself.
     """
 
     alpha: Array
@@ -64,12 +68,16 @@ class Hysteresis(eqx.Module):
     energy_after_up: Array
     energy_before_down: Array
     energy_after_down: Array
+    crossing: Array
 
     @property
     def result(self):
-        """The loop's code: the snap-up path's if it is not successful, else the snap-down's."""
+        """The loop's code: the snap-up path's if it is not successful, else the snap-down's,
+        else `self_intersecting` where a branch point passes through itself."""
         up, down = self.snap.up.result, self.snap.down.result
-        return RESULTS.where(up != RESULTS.successful, up, down)
+        paths = RESULTS.where(up != RESULTS.successful, up, down)
+        return RESULTS.where((paths == RESULTS.successful) & jnp.any(self.crossing), RESULTS.self_intersecting,
+                             paths)
 
 
 def _energy_at(scene, theta, force, alpha):
@@ -123,10 +131,11 @@ def _branches(scene, snap, bound, max_unstable, settings):
         first_bad = jnp.argmax(jnp.concatenate([too_unstable, jnp.ones(1, bool)]))
         valid = jnp.arange(n_pts) < first_bad
         e = jax.vmap(lambda t, m, a: _energy_at(scene, t, m, a))(br.theta, br.force, br.lam)
-        return br.lam, br.fold_height, e, br.num_unstable, valid
+        return br.lam, br.fold_height, e, br.num_unstable, valid, br.crossing
 
-    lam, fh, e, nu, valid = jax.vmap(one)(starts_t[idx], starts_m[idx], starts_l[idx], direction)
+    lam, fh, e, nu, valid, crossing = jax.vmap(one)(starts_t[idx], starts_m[idx], starts_l[idx], direction)
     valid = valid & ok[idx][:, None]
+    crossing = crossing & valid
     nan = jnp.nan
     lam, fh, e = (jnp.where(valid, x, nan) for x in (lam, fh, e))
     nu = jnp.where(valid, nu, -1)
@@ -138,7 +147,7 @@ def _branches(scene, snap, bound, max_unstable, settings):
 
     ebu, eau = jump_energies(snap.up, 1.0)
     ebd, ead = jump_energies(snap.down, -1.0)
-    return Hysteresis(lam, fh, e, nu, valid, snap, ebu, eau, ebd, ead)
+    return Hysteresis(lam, fh, e, nu, valid, snap, ebu, eau, ebd, ead, crossing)
 
 
 def fold_height_of(theta, force, scene, alpha):

@@ -146,6 +146,8 @@ def _land(scene, parameter, t, m, lam, v, direction, up_expected, solver):
 
 
 JUMP_DISTANCE = 0.1  # rad, L2 distance of the angle field; see `follow_path`
+NEAR_FOLD = 0.02
+"""|tau_lam| below which a path that does not snap is `fold_unresolved` (see `follow_path`)."""
 
 
 def _is_mirror_symmetric(theta, tol=1e-6):
@@ -156,8 +158,8 @@ def _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bise
     """Continue from (t0, m0) at parameter lam0 until stability changes; refine; land."""
     sc = parameter.set(scene, lam0)
     start = Equilibrium(t0, m0, RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), sc)
-    branch = continue_branch(sc, start, parameter, direction=direction,
-                             bounds=(-bound, bound), settings=settings, stop_on_instability=True)
+    branch = continue_branch(sc, start, parameter, direction=direction, bounds=(-bound, bound),
+                             settings=settings, stop_on_instability=True, check_contact=False)
     snaps = (branch.stop == 2) & ok0
     t, m, lam, v, _ = _refine(scene, parameter, branch, settings, tol, bisections)
     if isinstance(parameter, SymmetricAlpha):
@@ -181,8 +183,13 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
     asymmetric one); if it lands close by, the instability was supercritical (a stable
     asymmetric branch grows continuously out of the branch point, amplitude
     ~ sqrt(1e-3) ~ 0.03): no snap yet, and the path continues from that state, up to
-    `stages` times. `substituted` (traced bool): the start is the other path's end."""
-    def body(c, _):
+    `stages` times. `substituted` (traced bool): the start is the other path's end.
+
+    A path that reaches the bound without losing stability is a "no snap" only if its
+    tangent never all but turned in alpha on the way: a computed point with
+    |tau_lam| < `NEAR_FOLD` (next to a cusp, where the fold pair can be shorter than one
+    step and lie between two computed points) makes it `fold_unresolved`."""
+    def body(c, stage):
         t0, m0, lam0, ok, done, out = c
         def run(sc, d, args):
             t0, m0, lam0, ok0 = args
@@ -208,7 +215,7 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
         # lost stability but the relaxation past alpha_c found no equilibrium (`landed`
         # False: a loss of stability all the same, whose landing is unknown)
         final = ~done & (~snaps | jumped | ~landed)
-        new_out = (snaps, kind, t, m, lam, fb, ta, ma, fa, br.stop, landed, dist)
+        new_out = (snaps, kind, t, m, lam, fb, ta, ma, fa, br.stop, landed, dist, stage)
         out = jax.tree.map(lambda n, o: jnp.where(final, n, o), new_out, out)
         lam_next = lam + direction * 1e-3
         nxt = (ta, ma, lam_next, ok & snaps & landed, done | final, out)
@@ -217,16 +224,23 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
     dtype = start_eq.theta.dtype
     nan = jnp.full((), jnp.nan, dtype)
     out0 = (jnp.zeros((), bool), jnp.zeros((), jnp.int32), start_eq.theta, start_eq.force, nan, nan,
-            start_eq.theta, start_eq.force, nan, jnp.full((), -1, jnp.int32), jnp.ones((), bool), nan)
+            start_eq.theta, start_eq.force, nan, jnp.full((), -1, jnp.int32), jnp.ones((), bool), nan,
+            jnp.full((), stages - 1, jnp.int32))
     lam0 = parameter.get(start_eq.scene)
     ok0 = start_eq.result == RESULTS.successful
     init = (start_eq.theta, start_eq.force, jnp.asarray(lam0, dtype), ok0, jnp.zeros((), bool), out0)
-    (_, _, _, _, done, out), branches = lax.scan(body, init, None, length=stages)
-    snaps, kind, t, m, lam, fb, ta, ma, fa, stop, landed, dist = out
+    (_, _, _, _, done, out), branches = lax.scan(body, init, jnp.arange(stages, dtype=jnp.int32))
+    snaps, kind, t, m, lam, fb, ta, ma, fa, stop, landed, dist, last_stage = out
     snaps = snaps & done
     # decided without a snap, but not at the parameter bound (stop 1): the continuation
     # gave up (buffer full, step too small); or never decided (every stage supercritical)
     incomplete = ~done | (~snaps & (stop != 1))
+    # a path that reached the bound without losing stability but whose tangent all but turned
+    # in alpha at some computed point (|tau_lam| < NEAR_FOLD): near a cusp the fold pair can be
+    # shorter than a step and lie between two computed points, so "no snap" is not known
+    k = jnp.arange(branches.tau_lam.shape[-1])
+    inside = (k >= 1) & (k < branches.count[:, None]) & (jnp.arange(stages)[:, None] <= last_stage)
+    near_fold = jnp.any(inside & (jnp.abs(branches.tau_lam) < NEAR_FOLD))
     # the reported states must be configurations of the contact-free model: the critical
     # state (the start state where the path does not snap) and the landed one
     crossed = self_intersects(t, scene) | (snaps & landed & self_intersects(ta, scene))
@@ -234,7 +248,9 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
         ~ok0, start_eq.result,
         RESULTS.where(incomplete, RESULTS.continuation_incomplete,
                       RESULTS.where(snaps & ~landed, RESULTS.landing_failed,
-                                    RESULTS.where(crossed, RESULTS.self_intersecting, RESULTS.successful))))
+                                    RESULTS.where(crossed, RESULTS.self_intersecting,
+                                                  RESULTS.where(~snaps & near_fold, RESULTS.fold_unresolved,
+                                                                RESULTS.successful)))))
     start_result = RESULTS.where(ok0 & substituted, RESULTS.start_substituted, start_eq.result)
     lost = snaps & ~landed  # no landed state: NaN rather than the failed relaxation's iterate
     return SnapPath(

@@ -78,7 +78,7 @@ import numpy as np
 
 from .._misc import check_param
 from ..model import make_scene
-from ..results import RESULTS
+from ..results import RESULTS, result_name
 
 
 DEFAULT_GRID = tuple(np.round(np.arange(0.05, 0.951, 0.05), 4)) + (0.99,)
@@ -105,7 +105,16 @@ class TerminationGap(NamedTuple):
     `curve_end_gap_*` (the turn, Hermite estimate) and `curve_cusp_gap_*` (the cusp solved
     from the last point before the turn). `gap_criterion_*`: the bisection midpoint of the
     snap criterion; `gap_source_*`: where `gap_*` comes from ("continuation_cusp", "cusp",
-    "state_fold", "bisection"; "none" without a search)."""
+    "state_fold", "bisection"; "none" without a search).
+
+    `result_up`, `result_down` ([`jaxrod.RESULTS`][]; `result` the first that is not
+    successful): `successful` where the end is located (or is a branch point's, to `tol`);
+    `end_not_located` where a cusp or a lost start state ends the path but that end was not
+    solved (`gap_*` is then the bisection value, up to ~1e-3 below the end, without a
+    derivative); `no_snap` where no gap of the grid snaps; `termination_beyond_grid` where
+    the largest gap of the grid still snaps; or the code of a `snap_angles` evaluation that
+    decides the bracket (or, for `no_snap`, any gap of the grid) under which "snaps / does
+    not snap" is unknown (`continuation_incomplete`, `landing_failed`, `nonfinite`, ...)."""
 
     psi0_deg: float
     gap_up: float
@@ -143,6 +152,19 @@ class TerminationGap(NamedTuple):
     gap_criterion_down: float = math.nan
     gap_source_up: str = "none"
     gap_source_down: str = "none"
+    result_up: RESULTS = RESULTS.successful
+    result_down: RESULTS = RESULTS.successful
+
+    @property
+    def result(self):
+        """The code of the pair: the first of `result_up`, `result_down` that leaves a G* in
+        doubt (neither `successful` nor `no_snap`), else `no_snap` if a path never snaps,
+        else `successful`."""
+        codes = (self.result_up, self.result_down)
+        for c in codes:
+            if c != RESULTS.successful and c != RESULTS.no_snap:
+                return c
+        return RESULTS.no_snap if any(c == RESULTS.no_snap for c in codes) else RESULTS.successful
 
     def to_dict(self):
         def clean(x):
@@ -150,6 +172,8 @@ class TerminationGap(NamedTuple):
                 return None
             if isinstance(x, tuple):
                 return [clean(v) for v in x]
+            if isinstance(x, type(RESULTS.successful)):
+                return result_name(x)
             return x
 
         return {k: clean(v) for k, v in self._asdict().items()}
@@ -169,7 +193,7 @@ def _snap_at(base, psi0, gap):
     def summary(p):
         return dict(snaps=p.snaps, alpha=p.alpha_c, kind=p.kind,
                     jump=p.fold_height_after - p.fold_height_before,
-                    theta=p.theta_before, force=p.force_before, mode=p.mode)
+                    theta=p.theta_before, force=p.force_before, mode=p.mode, result=p.result._value)
 
     return dict(up=summary(r.up), down=summary(r.down), has_up=has_up, has_down=has_down)
 
@@ -223,13 +247,16 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
         snaps = [bool(o[name]["snaps"]) for _, o in scan]
         if not any(snaps):
             results[name] = dict(gap=math.nan, bracket=(math.nan, math.nan), reason="never_snaps", kind="none",
-                                 alpha=math.nan, jump=math.nan)
+                                 alpha=math.nan, jump=math.nan,
+                                 result=_uncertain([o[name] for _, o in scan], RESULTS.no_snap,
+                                                    allow=("self_intersecting",)))
             continue
         i = max(k for k, s in enumerate(snaps) if s)
         if i == len(grid) - 1:
             o = scan[i][1][name]
             results[name] = dict(gap=1.0, bracket=(grid[-1], 1.0), reason="no_termination",
-                                 kind=KIND_NAMES[int(o["kind"])], alpha=float(o["alpha"]), jump=float(o["jump"]))
+                                 kind=KIND_NAMES[int(o["kind"])], alpha=float(o["alpha"]), jump=float(o["jump"]),
+                                 result=_uncertain([o], RESULTS.termination_beyond_grid))
             continue
         lo, hi = grid[i], grid[i + 1]
         o_lo, o_hi = scan[i][1], scan[i + 1][1]
@@ -252,7 +279,9 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
         else:
             reason = "snap_vanishes"
         results[name] = dict(gap=0.5 * (lo + hi), bracket=(lo, hi), reason=reason, kind=kind,
-                             alpha=float(p["alpha"]), jump=jump)
+                             alpha=float(p["alpha"]), jump=jump,
+                             result=_uncertain([p, o_hi[name]] + [o[name] for _, o in scan[i + 2:]],
+                                               RESULTS.successful))
         if reason == "cusp":
             results[name].update(_cusp(base, psi, lo, p))
             # the same end by two-parameter continuation of the critical point in (G, alpha),
@@ -278,14 +307,37 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
                           u.get("curve_cusp_gap", nan), d.get("curve_cusp_gap", nan),
                           u.get("curve_points", 0), d.get("curve_points", 0),
                           u.get("curve_end_reason", "none"), d.get("curve_end_reason", "none"),
-                          u["gap_criterion"], d["gap_criterion"], u["gap_source"], d["gap_source"])
+                          u["gap_criterion"], d["gap_criterion"], u["gap_source"], d["gap_source"],
+                          u["result"], d["result"])
+
+
+# path codes under which a snap_angles evaluation still answers "does it snap here" for the
+# bisection: its start state missing or substituted (the start_state_lost end), alpha_c without
+# a derivative, or a fold pair not resolved next to a cusp (read as "no snap"; the cusp itself
+# is then solved, and reported where found, else the end is `end_not_located`)
+_DECIDED = ("successful", "state_not_found", "start_substituted", "derivative_unavailable", "fold_unresolved")
+
+
+def _uncertain(evaluations, otherwise, allow=()):
+    """The first code among the snap-criterion `evaluations` (the `_snap_at` summaries that
+    decide the answer) under which "snaps / does not snap" is unknown (a continuation cut
+    short, a failed landing, a non-finite solve, a state through itself unless `allow`ed),
+    else `otherwise`. A scan that never snaps may `allow` self-intersecting states at the
+    smallest gaps: those paths do not snap in the contact-free model either."""
+    for o in evaluations:
+        name = result_name(int(o["result"]))
+        if name not in _DECIDED + tuple(allow):
+            return getattr(RESULTS, name)
+    return otherwise
 
 
 def _exact_end(r):
     """Report as `gap` the exact end of the path where it was located, keeping the snap
     criterion's bisection midpoint as `gap_criterion`: a cusp end is where the fold curve,
     continued in (G, alpha), turns (`curve_cusp_gap`; the direct cusp solve `cusp` if the
-    continuation did not reach it); a lost start state is its fold in G (`state_fold`)."""
+    continuation did not reach it); a lost start state is its fold in G (`state_fold`).
+    Where neither was solved the path's `result` is `end_not_located`."""
+    r.setdefault("result", RESULTS.successful)
     r["gap_criterion"] = r["gap"]
     r["gap_source"] = "bisection" if r["reason"] in ("cusp", "supercritical", "snap_vanishes",
                                                      "start_state_lost") else "none"
@@ -301,6 +353,9 @@ def _exact_end(r):
                 break
     elif r["reason"] == "start_state_lost" and math.isfinite(r.get("state_fold", math.nan)):
         r["gap"], r["gap_source"] = r["state_fold"], "state_fold"
+    if r["reason"] in ("cusp", "start_state_lost") and r["gap_source"] == "bisection" \
+            and r["result"] == RESULTS.successful:
+        r["result"] = RESULTS.end_not_located
 
 
 @eqx.filter_jit

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import math
 
 
@@ -39,7 +40,7 @@ def register(sub):
 
 
 def _cmd_termination_gap(args):
-    from ._main import EXIT_OK, InputError
+    from ._main import EXIT_NOT_CONVERGED, EXIT_OK, InputError
 
     import jaxrod as jr
 
@@ -61,5 +62,12 @@ def _cmd_termination_gap(args):
             src = rec.get(f"gap_source_{name}", "none")
             extra = (f"; snap criterion {crit:.6f}" if src not in ("bisection", "none") and crit is not None else "")
             print(f"snap {name:<4}: " + ("never snaps" if g is None else
-                  f"G*/L = {g:.6f} ({rec[f'reason_{name}']}, from {src}{extra}; last snap: {rec[f'kind_{name}']})"))
+                  f"G*/L = {g:.6f} ({rec[f'reason_{name}']}, from {src}{extra}; last snap: {rec[f'kind_{name}']})")
+                  + f"; result {rec[f'result_{name}']}")
+    # `no_snap` is an answer ("this path never snaps"), every other code leaves G* in doubt
+    bad = [f"{name}: {rec[f'result_{name}']}" for name in ("up", "down")
+           if rec[f"result_{name}"] not in ("successful", "no_snap")]
+    if bad:
+        print(f"jaxrod termination-gap: {', '.join(bad)} (see jaxrod.RESULTS)", file=sys.stderr)
+        return EXIT_NOT_CONVERGED
     return EXIT_OK

@@ -17,6 +17,7 @@ import json
 import math
 import os
 
+from ..results import result_name
 from ._main import EXIT_NOT_CONVERGED, EXIT_OK, InputError
 
 
@@ -98,7 +99,9 @@ def _cmd_design_speed(args):
     b, chk = res.design, res.verification
     rec = {"psi0_deg": b.psi0_deg, "gap": b.gap, "s0": b.s0, "snap_speed": _finite_or_none(res.v_s),
            "target_snap_speed": v, "tol": tol, "reached": res.reached, "design_reached": bool(b.reached),
-           "status": b.status, "num_iterations": int(b.num_iterations), "n": n,
+           "status": b.status, "result": result_name(b.result) if res.reached else
+           ("target_not_reached" if b.status != "infeasible_start" else "infeasible_start"),
+           "num_iterations": int(b.num_iterations), "n": n,
            "check": chk.to_dict(), "message": res.message, "num_starts": len(res.runs),
            "wall_time_s": res.wall_time}
     _save(b, args.save, rec)
@@ -109,8 +112,8 @@ def _cmd_design_speed(args):
         print(f"  snap_speed  {res.v_s:.4f} v*  (target {v:g} +- {100 * tol:g} %)")
         print(f"  check at N = {chk.n} ({chk.solver}, rtol {chk.rtol:g}): v_s = {chk.v_s:.4f} v*, "
               f"error {100 * chk.error:.3f} %")
-        print(f"  {res.message}; {res.wall_time:.1f} s")
-    return EXIT_OK if res.reached else EXIT_NOT_CONVERGED
+        print(f"  {res.message}; {res.wall_time:.1f} s; result {rec['result']}")
+    return EXIT_OK if rec["result"] == "successful" else EXIT_NOT_CONVERGED
 
 
 def _cmd_design(args):
@@ -169,8 +172,8 @@ def _cmd_design(args):
         for nm, a, t in zip(b.names, b.achieved.tolist(), b.targets.tolist()):
             print(f"  {nm:<18} {a:+.4f} deg  (target {t:+g} +- {args.tol:g})")
         print(f"  {b.message}; {res.num_reached}/{res.num_starts} starts reached the target "
-              f"in {res.wall_time:.1f} s")
-    return EXIT_OK if bool(b.reached) else EXIT_NOT_CONVERGED
+              f"in {res.wall_time:.1f} s; result {rec['result']}")
+    return EXIT_OK if rec["result"] == "successful" else EXIT_NOT_CONVERGED
 
 
 def _cmd_reproduce(args):

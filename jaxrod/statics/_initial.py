@@ -106,6 +106,12 @@ def initial_state(scene, state: str = "up", *, steps: int = 24, solver: Newton =
     return flag_contact(initial_state_signed(scene, 1.0 if state == "up" else -1.0, steps=steps, solver=solver))
 
 
+def _finite(tree):
+    """True when every float leaf of `tree` is finite."""
+    leaves = jax.tree.leaves(eqx.filter(tree, eqx.is_inexact_array))
+    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in leaves]))
+
+
 def initial_state_signed(scene, sgn, *, steps: int = 24, solver: Newton = Newton()) -> Equilibrium:
     """`initial_state` with the side as a number, +1 up or -1 down (may be traced, e.g.
     mapped with `lax.map` to build both states through one traced body)."""
@@ -140,4 +146,6 @@ def initial_state_signed(scene, sgn, *, steps: int = 24, solver: Newton = Newton
     good = eq.converged & eq.stable & (sgn * _fold_height(eq.theta, eq.force, eq.scene) > 0)
     result = RESULTS.where(found & good, eq.result,
                            RESULTS.where(eq.converged | ~found, RESULTS.state_not_found, eq.result))
+    # a NaN or infinite parameter (a bad member of a batch) is a bad input, not a missing state
+    result = RESULTS.where(_finite(scene), result, RESULTS.nonfinite)
     return eqx.tree_at(lambda e: e.result, eq, result)
