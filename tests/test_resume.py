@@ -272,14 +272,14 @@ def _fake_dynamics(monkeypatch, calls):
     def snap_angles(scene):
         p, g = np.degrees(float(scene.strip.psi0)), float(scene.clamps.gap)
         calls.append((round(float(p), 9), g))
-        path = types.SimpleNamespace(snaps=g < 0.55)
+        path = types.SimpleNamespace(snaps=g < 0.55, result=jr.RESULTS.successful)
         return types.SimpleNamespace(up=path, down=path)
 
     def snap_dynamics(scene, direction, **kw):
         p, g = float(scene.strip.psi0), float(scene.clamps.gap)
         start = types.SimpleNamespace(alpha_c=np.sin(p + g), bending_before=1.0 / 3.0 + p * g)
         tr = types.SimpleNamespace(v_s=40.0 - 30.0 * g - 5.0 * p + kw["t1"], t_cross=np.pi * g, kinetic_peak=np.e * p,
-                                   num_steps=1000 + int(100 * g), snapped=True)
+                                   num_steps=1000 + int(100 * g), snapped=True, result=jr.RESULTS.successful)
         return start, tr
 
     monkeypatch.setattr(jr, "snap_angles", snap_angles)
@@ -343,3 +343,42 @@ def test_speed_plane_torn_rows_and_other_settings(tmp_path, monkeypatch, capsys)
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "speed_plane.csv" in err[0] and "--out" in err[0], err
     assert "bending_energy_before,num_steps\n30.0" in (old / "speed_plane.csv").read_text()
+
+
+def test_speed_plane_rows_carry_codes(tmp_path, monkeypatch, capsys):
+    """Every row of the speed plane carries its code: `successful` for a resolved snap,
+    `no_snap` where the path does not snap, the path's code where its outcome is unknown
+    (no dynamics run there), the trajectory's where the run failed; the flagged points are
+    counted in the JSON record and on stderr."""
+    import csv
+
+    import jaxrod as jr
+    from jaxrod.cli._main import main
+
+    calls = []
+    _fake_dynamics(monkeypatch, calls)
+    fake_angles, fake_dynamics = jr.snap_angles, jr.snap_dynamics
+
+    def snap_angles(scene):
+        r = fake_angles(scene)
+        if float(scene.clamps.gap) == 0.5:  # the continuation gave up here
+            r.up.result = jr.RESULTS.continuation_incomplete
+            r.up.snaps = False
+        return r
+
+    def snap_dynamics(scene, direction, **kw):
+        start, tr = fake_dynamics(scene, direction, **kw)
+        if float(scene.clamps.gap) == 0.3:
+            tr.result, tr.snapped = jr.RESULTS.energy_drift, False
+        return start, tr
+
+    monkeypatch.setattr(jr, "snap_angles", snap_angles)
+    monkeypatch.setattr(jr, "snap_dynamics", snap_dynamics)
+    out = tmp_path / "sp"
+    assert main(["speed-plane", "--psi0", "30", "--gaps", "0.3,0.4,0.5,0.6", "--n", "16", "--out", str(out)]) == 0
+    cap = capsys.readouterr()
+    with open(out / "speed_plane.csv", newline="") as fh:
+        codes = {float(r["gap"]): r["result"] for r in csv.DictReader(fh)}
+    assert codes == {0.3: "energy_drift", 0.4: "successful", 0.5: "continuation_incomplete", 0.6: "no_snap"}
+    assert json.loads(cap.out)["flagged"] == {"continuation_incomplete": 1, "energy_drift": 1}
+    assert "continuation_incomplete x1, energy_drift x1" in cap.err

@@ -155,6 +155,15 @@ class Branch(eqx.Module):
                              RESULTS.where(crossed, RESULTS.self_intersecting, RESULTS.successful))
 
 
+def branch_crossings(theta, force, count, scene):
+    """(M,) whether each of the first `count` states of `theta` (M, N) passes through itself
+    (`jaxrod.self_intersects`; False past `count`): one O(N^2) check per computed point."""
+    def body(k, out):
+        return out.at[k].set(self_intersects(theta[k], scene, force=force[k]))
+
+    return lax.fori_loop(0, count, body, jnp.zeros(theta.shape[0], bool))
+
+
 def _pieces(scene, parameter):
     """Residual F(x, lam), its lam-derivative and the structured Jacobian."""
 
@@ -350,7 +359,6 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
     b = out["buf"]
     crossing = None
     if check_contact:
-        crossed = lax.map(lambda tm: self_intersects(tm[0], scene, force=tm[1]), (b["theta"], b["force"]))
-        crossing = crossed & (jnp.arange(M) < out["i"])
+        crossing = branch_crossings(b["theta"], b["force"], out["i"], scene)
     return Branch(b["lam"], b["theta"], b["force"], b["tau_lam"], b["num_unstable"], b["fold_height"], b["ds"],
                   out["i"], out["stop"], crossing)

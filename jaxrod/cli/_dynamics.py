@@ -22,6 +22,7 @@ import json
 import math
 import os
 
+from ..results import RESULTS
 from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _result_name, add_scene_args, make_scene_from_args)
 
 PAPER_FIT = (42.59, 30.38, 5.00)
@@ -188,7 +189,7 @@ def _cmd_snap(args):
 # rest, rows of other settings stay in the file untouched (and out of this run's fit).
 SETTINGS = ["n", "s0", "direction", "nudge", "solver", "rtol", "t1"]
 RESULT_FIELDS = ["snaps", "alpha_c_deg", "v_s", "t_snap", "kinetic_energy_peak", "bending_energy_before",
-                 "num_steps"]
+                 "num_steps", "result"]
 FIELDS = ["psi0_deg", "gap", *SETTINGS, *RESULT_FIELDS]
 
 
@@ -228,9 +229,12 @@ def _parse_row(r):
 
     if r["direction"] not in ("up", "down") or r["snaps"] not in ("True", "False") or not r["solver"]:
         raise ValueError("bad direction, snaps or solver")
+    if r["result"] not in RESULTS._name_to_item:
+        raise ValueError("bad result code")
     row = dict(psi0_deg=float(r["psi0_deg"]), gap=float(r["gap"]), n=int(r["n"]), s0=float(r["s0"]),
                direction=r["direction"], nudge=float(r["nudge"]), solver=r["solver"], rtol=float(r["rtol"]),
-               t1=float(r["t1"]), snaps=r["snaps"] == "True", num_steps=num(r["num_steps"], int))
+               t1=float(r["t1"]), snaps=r["snaps"] == "True", num_steps=num(r["num_steps"], int),
+               result=r["result"])
     row.update({k: num(r[k]) for k in RESULT_FIELDS if k not in row})
     return row
 
@@ -254,7 +258,7 @@ def _read_rows(path):
     records = list(csv.reader(lines))
     if records[0] != FIELDS:
         raise InputError(f"out: {path} is not a speed-plane CSV with the columns {','.join(FIELDS)} (an older "
-                         "jaxrod's has no settings columns): move it away or choose another --out")
+                         "jaxrod's lacks the settings or result columns): move it away or choose another --out")
     rows = []
     for r in records[1:]:
         try:
@@ -325,14 +329,18 @@ def _cmd_speed_plane(args):
         scene = _array_leaves(jr.make_scene(p, g, 0, s0=args.s0, n=args.n))
         snap = jr.snap_angles(scene)
         path_ = snap.up if args.direction == "up" else snap.down
-        row = dict(psi0_deg=p, gap=g, **settings, snaps=bool(path_.snaps))
-        if row["snaps"]:
+        row = dict(psi0_deg=p, gap=g, **settings, snaps=bool(path_.snaps),
+                   result=_result_name(path_.result) if path_.result != jr.RESULTS.successful else
+                   ("successful" if bool(path_.snaps) else "no_snap"))
+        if row["snaps"] and row["result"] == "successful":
             start, tr = jr.snap_dynamics(scene, args.direction, kind="brink", nudge=args.nudge, snap=snap,
                                          solver=args.solver, rtol=args.rtol, atol=args.rtol, t1=args.t1)
             row.update(alpha_c_deg=float(np.degrees(start.alpha_c)), v_s=float(tr.v_s),
                        t_snap=float(tr.t_cross), kinetic_energy_peak=float(tr.kinetic_peak),
                        bending_energy_before=float(start.bending_before), num_steps=int(tr.num_steps))
             row["snaps"] = bool(tr.snapped)
+            row["result"] = (_result_name(tr.result) if tr.result != jr.RESULTS.successful else
+                             "successful" if row["snaps"] else "snap_not_resolved")
         rows.append({k: row.get(k) for k in FIELDS})
         _write_rows(path, rows)  # the whole file, atomically, after every point
         computed.append([p, g])
@@ -342,6 +350,15 @@ def _cmd_speed_plane(args):
             first.setdefault((r["psi0_deg"], r["gap"]), r)
     rows = [first[pt] for pt in grid]
     out = dict(points=len(rows), snapping=sum(bool(r["snaps"]) for r in rows), csv=path, computed_points=computed)
+    # every point whose code is neither `successful` nor `no_snap` (the codes are in the CSV)
+    flagged = {}
+    for r in rows:
+        if r["result"] not in ("successful", "no_snap"):
+            flagged[r["result"]] = flagged.get(r["result"], 0) + 1
+    out["flagged"] = flagged
+    if flagged:
+        print("jaxrod speed-plane: points not successful (codes in the CSV): "
+              + ", ".join(f"{k} x{v}" for k, v in sorted(flagged.items())), file=sys.stderr)
     if out["snapping"] >= 4:
         coef, err, rms = fit_plane(rows)
         out.update(fit=dict(v_m=coef[0], a=coef[1], b=coef[2], stderr=err, rms=rms),
