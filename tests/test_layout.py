@@ -11,6 +11,7 @@ underscore name of it, and (3) leave the design package out of the core.
 
 import ast
 import pathlib
+import re
 import sys
 
 import pytest
@@ -120,3 +121,15 @@ def test_top_level_names_unchanged():
               "plot_shape", "plot_hysteresis", "plot_phase_diagram", "BorderedTridiagonal", "lagrangian",
               "discretize", "Equilibrium", "ExtrapolatedPath", "refined_scene"]:
         assert hasattr(jr, n), n
+
+
+def test_readme_lists_every_result_code():
+    """The README's result-code table has a row for every member of `jaxrod.RESULTS`."""
+    import jaxrod as jr
+
+    text = (ROOT / "README.md").read_text()
+    table = text[text.index("### Result codes"):]
+    table = table[:table.index("\n\n", table.index("| code |"))]
+    rows = [line for line in table.splitlines() if line.startswith("| `")]
+    listed = {name for line in rows for name in re.findall(r"`(\w+)`", line.split("|")[1])}
+    assert set(jr.RESULTS._name_to_item) <= listed, sorted(set(jr.RESULTS._name_to_item) - listed)
