@@ -73,8 +73,8 @@ def _study_b_problem(n):
     return ds.Problem((ds.SnapSpeed(100.0, tol=1.0),), param, n)
 
 
-@pytest.mark.slow  # 77 s on 2 cores; in CI, notebook 03's gradient cell is checked against central
-# differences at the same N and steps (tests/test_notebook_03_snap_speed_design.py)
+@pytest.mark.slow  # 77 s on 2 cores; in CI, test_snap_speed_gradient_matches_central_differences checks
+# the same custom JVP against central differences at the same N and steps
 def test_snap_speed_gradient_in_the_design_loop_matches_central_differences():
     """The Jacobian the design loop uses (jacfwd through snap_speed's custom JVP, in the
     unconstrained z of the parametrization, the compiled function of study (b)) vs central
@@ -98,11 +98,10 @@ def test_snap_speed_gradient_in_the_design_loop_matches_central_differences():
     assert np.all(np.abs(J[0]) > 1.0)
 
 
-@pytest.mark.slow
 def test_snap_speed_gradient_matches_central_differences():
     """d v_s / d(Psi0, G, s0) of jr.snap_speed by jax.jacfwd (custom JVP: one reverse pass
     through the implicitly differentiated critical state and the fixed-step run) vs central
-    differences, N = 16 (slow only because it is one more compile than the CI file needs)."""
+    differences, N = 16: the CI check of the snap-speed gradient."""
     _check_gradient(N, rtol=1e-4)
 
 

@@ -10,6 +10,11 @@ pytest.importorskip("nbformat")
 from helpers import notebook_text, run_notebook  # noqa: E402
 
 
+# nightly (`pytest -m slow`): the notebook compiles most of the library afresh in its own kernel,
+# 2-5 min on 2 cores; the CI set checks the same library calls in the unit tests
+pytestmark = pytest.mark.slow
+
+
 def test_notebook_04_programmable_actuator():
     out = notebook_text(run_notebook("04_programmable_actuator.ipynb"))
     assert "quick mode" in out and "outcome: reached" in out and "not reached: N = 24 step 1" in out

@@ -30,6 +30,11 @@ N, N_DYN = 40, 24  # the notebook's quick mode: statics mesh, dynamics mesh
 V_S_30_05 = 26.3328
 
 
+# nightly (`pytest -m slow`): the notebook compiles most of the library afresh in its own kernel,
+# 2-5 min on 2 cores; the CI set checks the same library calls in the unit tests
+pytestmark = pytest.mark.slow
+
+
 def test_notebook_05_paper_figures():
     check(run_notebook("05_paper_figures.ipynb"))
 
