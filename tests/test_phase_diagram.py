@@ -123,15 +123,31 @@ def test_cli_json(tmp_path, monkeypatch, capsys):
     from jaxrod.cli._main import main
 
     out = tmp_path / "pd"
+    # the stand-in's codes cycle through 0, 1, 2: flagged points, exit 3 with every file written
     assert main(["phase-diagram", "--psi0", "60,180", "--gaps", "0.2:0.6:0.2", "--out", str(out),
-                 "--no-termination", "--json"]) == 0
-    rec = json.loads(capsys.readouterr().out)
+                 "--no-termination", "--json"]) == 3
+    cap = capsys.readouterr()
+    rec = json.loads(cap.out)
     assert rec["gaps"] == [0.2, 0.4, 0.6] and rec["psi0_deg"] == [60.0, 180.0]
     assert os.path.exists(rec["netcdf"]) and os.path.exists(rec["png"])
     assert rec["computed_chunks"] == [60.0, 180.0]
+    assert rec["flagged"] and "points not successful" in cap.err
     assert main(["phase-diagram", "--psi0", "60,180", "--gaps", "0.2:0.6:0.2", "--out", str(out),
-                 "--no-termination", "--json"]) == 0
+                 "--no-termination", "--json"]) == 3
     assert json.loads(capsys.readouterr().out)["computed_chunks"] == []
+    # every point successful: exit 0
+    ok = int(jr.RESULTS.successful._value)
+
+    def all_ok(psi0, gaps, s0, mesh):
+        d = _fake_chunk([])(psi0, gaps, s0, mesh)
+        for k in ("start_up", "start_down", "result_up", "result_down"):
+            d[k] = np.full(np.asarray(gaps).size, ok, np.int32)
+        return d
+
+    monkeypatch.setattr(_phase, "_chunk", all_ok)
+    assert main(["phase-diagram", "--psi0", "90", "--gaps", "0.3,0.5", "--out", str(tmp_path / "ok"),
+                 "--no-termination", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["flagged"] == {}
 
 
 def test_warm_started_chunk_equals_single_calls(tmp_path):

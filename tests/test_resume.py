@@ -55,7 +55,8 @@ def _finish(proc, log_dir, name):
         proc.wait()
         raise
     out, err = _log(log_dir, name)
-    assert rc == 0, (name, rc, out, err[-3000:])
+    # 3: finished, with points whose code is not successful (stored in the files)
+    assert rc == 0 or (rc == 3 and "points not successful" in err), (name, rc, out, err[-3000:])
     return out, err
 
 
@@ -375,7 +376,7 @@ def test_speed_plane_rows_carry_codes(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(jr, "snap_angles", snap_angles)
     monkeypatch.setattr(jr, "snap_dynamics", snap_dynamics)
     out = tmp_path / "sp"
-    assert main(["speed-plane", "--psi0", "30", "--gaps", "0.3,0.4,0.5,0.6", "--n", "16", "--out", str(out)]) == 0
+    assert main(["speed-plane", "--psi0", "30", "--gaps", "0.3,0.4,0.5,0.6", "--n", "16", "--out", str(out)]) == 3
     cap = capsys.readouterr()
     with open(out / "speed_plane.csv", newline="") as fh:
         codes = {float(r["gap"]): r["result"] for r in csv.DictReader(fh)}

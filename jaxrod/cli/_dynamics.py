@@ -367,7 +367,8 @@ def _cmd_speed_plane(args):
         out["figure"] = os.path.join(args.out, "speed_plane.png")
     _write_atomic(os.path.join(args.out, "speed_plane_fit.json"), lambda fh: json.dump(out, fh, indent=1))
     print(json.dumps(out))
-    return EXIT_OK
+    # every file is written either way; the exit status says whether every point is trusted
+    return EXIT_NOT_CONVERGED if flagged else EXIT_OK
 
 
 def _plot_plane(rows, coef, path):

@@ -101,7 +101,7 @@ def _parse_list(text, what):
 
 
 def _cmd_phase_diagram(args):
-    from ._main import EXIT_OK, InputError
+    from ._main import EXIT_NOT_CONVERGED, EXIT_OK, InputError
 
     psis = _parse_list(args.psi0, "psi0")
     gaps = _parse_list(args.gaps, "gaps")
@@ -162,7 +162,8 @@ def _cmd_phase_diagram(args):
     if flagged:
         print("jaxrod phase-diagram: points not successful (codes in the NetCDF file): "
               + ", ".join(f"{k} x{v}" for k, v in sorted(flagged.items())), file=sys.stderr)
-    return EXIT_OK
+    # every file is written either way; the exit status says whether every point is trusted
+    return EXIT_NOT_CONVERGED if flagged else EXIT_OK
 
 
 def register(sub):
