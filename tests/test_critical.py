@@ -1,4 +1,4 @@
-"""Critical points on the extended system (issue 3): refinement to 1e-8 rad, regularity at
+"""Critical points on the extended system: refinement to 1e-8 rad, regularity at
 folds and (symmetry-restricted) branch points, implicit gradients against central
 differences, vmap equals loop, no recompilation."""
 

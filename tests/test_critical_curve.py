@@ -1,4 +1,4 @@
-"""Two-parameter continuation of critical points in (G, alpha) (issue 3, item 4):
+"""Two-parameter continuation of critical points in (G, alpha):
 `jaxrod.continue_critical` follows a fold (snap down) to the cusp where its gap turns and a
 branch point (snap up) along the gap; its points are the critical points `snap_angles`
 finds independently (continuation in alpha + bisection + extended-system polish) at the

@@ -1,4 +1,4 @@
-"""Snap angles by continuation (issue 3, first part): flat-strip symmetry, the paper's
+"""Snap angles by continuation: flat-strip symmetry, the paper's
 qualitative facts, kinds of instability, and agreement of the refined alpha_c with
 brute-force equilibrium checks on either side."""
 

@@ -362,7 +362,7 @@ def test_phase_diagram_walks_miss_no_instability():
     assert _check_walks(walks) > 4000
 
 
-@pytest.mark.slow  # 51.5 s alone at stop 14, 150 s on stop 15's ~2.3x slower machine; most of it the 205 snap_angles
+@pytest.mark.slow  # 50-150 s alone on 2 cores; most of it the 205 snap_angles
 def test_no_missed_instability_on_the_phase_diagram_grid(snap):
     """The same check on `snap_angles` (homotopy start states, polished angles) at every
     point of the phase-diagram grid."""

@@ -1,4 +1,4 @@
-"""Termination gap G*(Psi0) (issue 3): input checks, the flat strip, the CLI; slow: G* for
+"""Termination gap G*(Psi0): input checks, the flat strip, the CLI; slow: G* for
 Psi0 = 30, 60, 90, 120 deg cross-checked by direct snap_angles calls just below and above."""
 
 from __future__ import annotations
