@@ -178,12 +178,9 @@ def _finite(x):
 
 
 def _result_name(result):
-    import jaxrod as jr
+    from ..results import result_name
 
-    for name in getattr(jr.RESULTS, "_name_to_item", {}):
-        if bool(result == getattr(jr.RESULTS, name)):
-            return name
-    return "unknown"
+    return result_name(result)
 
 
 def _record(eq, state, k=4, angles_deg=None):
