@@ -245,3 +245,60 @@ def test_branch_points_through_themselves_are_flagged():
             assert eqx.tree_at(lambda b: b.stop, br, jnp.asarray(1, jnp.int32)).result == jr.RESULTS.self_intersecting
         else:
             assert not any(ref) and int(br.stop) == 1 and br.result == jr.RESULTS.successful
+
+
+# ---------------------------------------------------------------- the O(N) screen
+
+def _full_check(theta, scene, tol):
+    c, crosses = _contact.segment_distances(_contact._nodes(theta, scene, None))
+    return crosses | (c <= tol)
+
+
+full_batch = jax.jit(jax.vmap(_full_check, in_axes=(0, None, None)))
+intersects_tol_batch = jax.jit(jax.vmap(_contact.self_intersects, in_axes=(0, None, None)))
+
+
+@pytest.mark.parametrize("tol", [1e-9, 3e-3])
+def test_screen_never_changes_the_answer(tol):
+    """`self_intersects` (screen first, pair check only where the screen fails) equals the
+    pair check alone on 600 shapes: smooth ones whose angle range straddles pi (the screen's
+    limit), random walks that cross, and shapes whose smallest projection is near `tol`."""
+    n = 40
+    scene = jr.make_scene(n=n)
+    rng = np.random.default_rng(7)
+    s = np.linspace(0, 1, n)
+    smooth = [a * np.sin(np.pi * k * s + ph) for a, k, ph in
+              zip(rng.uniform(0.5, 2.5, 300), rng.integers(1, 4, 300), rng.uniform(0, 2 * np.pi, 300))]
+    walks = [np.cumsum(rng.normal(0, 0.6, n)) for _ in range(200)]
+    # monotone shapes with one segment almost perpendicular to the mid direction: its
+    # projection h sin(eps) sits just above or below tol
+    near = []
+    for eps in np.geomspace(1e-4, 1e-1, 100):
+        th = np.zeros(n)
+        th[n // 2] = np.pi / 2 - eps
+        th[: n // 2] = -np.pi / 2 + eps
+        near.append(th)
+    thetas = jnp.asarray(np.array(smooth + walks + near))
+    got = np.asarray(intersects_tol_batch(thetas, scene, tol))
+    ref = np.asarray(full_batch(thetas, scene, tol))
+    np.testing.assert_array_equal(got, ref)
+    one = jax.jit(_contact.self_intersects)
+    for k in range(0, len(thetas), 37):  # unbatched, where the screen decides alone
+        assert bool(one(thetas[k], scene, tol)) == bool(ref[k])
+    assert 20 < ref.sum() < len(ref) - 20  # both answers occur
+    # and the screen alone decides a good part of them
+    screened = jax.vmap(lambda t: _contact._screen(_contact._nodes(t, scene, None), t, tol))(thetas)
+    assert int(np.sum(screened)) > 100 and not np.any(np.asarray(screened) & ref)
+
+
+def test_screen_decides_smooth_states(up_state, critical_states):
+    """The screen passes for the clear up state (angle range below pi) and fails for the
+    crossing critical states: the screen's claim checked on its own."""
+    def screen(theta, scene):
+        x = _contact._nodes(theta, scene, None)
+        return bool(_contact._screen(x, theta, _contact.TOL * scene.strip.length))
+
+    assert screen(up_state.theta, up_state.scene)
+    scene, thetas = critical_states
+    for th in thetas:
+        assert not screen(th, scene)

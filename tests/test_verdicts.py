@@ -105,6 +105,28 @@ def test_states_through_themselves_are_flagged():
         assert float(jr.clearance(p.theta_before, jr.make_scene(n=N))) > 0
 
 
+def test_path_through_itself_before_its_snap_is_flagged():
+    """At Psi0 = 30 deg, G/L = 0.34 the down path's critical and landed states are clear of
+    themselves, but the strip passes through itself on the way there: the path is
+    `self_intersecting`, and `branch.crossing` marks exactly the computed points that an
+    independent crossing test finds."""
+    p = _snap(30, 0.34).down
+    h = np.full(N, 1.0 / N)
+    assert bool(p.snaps)
+    assert not crosses(p.theta_before, h) and not crosses(p.theta_after, h)
+    count = int(p.branch.count[0])
+    ref = [crosses(p.branch.theta[0, k], h) for k in range(count)]
+    assert any(ref) and not all(ref)
+    assert np.asarray(p.branch.crossing[0, :count]).tolist() == ref
+    assert not np.any(np.asarray(p.branch.crossing[0, count:]))
+    assert p.result == jr.RESULTS.self_intersecting
+    # the landed branch after the snap is checked point by point too
+    count1 = int(p.branch.count[1])
+    assert count1 > 1
+    ref1 = [crosses(p.branch.theta[1, k], h) for k in range(count1)]
+    assert np.asarray(p.branch.crossing[1, :count1]).tolist() == ref1
+
+
 def test_failed_refinement_says_no_derivative():
     """Where the extended-system refinement is not accepted (here: the bisection value is
     moved 1e-4 rad away, outside its 1e-6 rad acceptance), alpha_c stays the bisection

@@ -8,7 +8,8 @@ state the snap-down path reached at its most negative angle, i.e. the other half
 quasi-static hysteresis protocol, and says so (`start_result` is `start_substituted`).
 A loss of stability at a fold is a snap however small the jump; at a branch point a
 landing close by means a supercritical branch is followed (see `follow_path`). The critical
-and landed states are checked for self-intersection (`jaxrod.self_intersects`).
+and landed states and every computed point of the path's stages are checked for
+self-intersection (`jaxrod.self_intersects`).
 
 The critical point between the last stable and the first unstable point is refined by
 bisection on the arclength along the stable point's tangent (each trial is a corrector
@@ -63,7 +64,8 @@ class SnapPath(eqx.Module):
 
     `result` is the whole path's code: `successful`, or the start state's code where it does
     not exist, `continuation_incomplete`, `landing_failed`, `self_intersecting` (the
-    critical or the landed state passes through itself), `derivative_unavailable` (the
+    critical or the landed state, or a computed point of a stage up to the deciding one,
+    passes through itself; `branch.crossing` marks the points), `derivative_unavailable` (the
     refinement failed: `alpha_c` is the bisection value). `start_result` is
     `start_substituted` where the path started from the other path's end (see the module
     docstring).
@@ -159,7 +161,7 @@ def _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bise
     sc = parameter.set(scene, lam0)
     start = Equilibrium(t0, m0, RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), sc)
     branch = continue_branch(sc, start, parameter, direction=direction, bounds=(-bound, bound),
-                             settings=settings, stop_on_instability=True, check_contact=False)
+                             settings=settings, stop_on_instability=True, check_contact=True)
     snaps = (branch.stop == 2) & ok0
     t, m, lam, v, _ = _refine(scene, parameter, branch, settings, tol, bisections)
     if isinstance(parameter, SymmetricAlpha):
@@ -242,8 +244,10 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
     inside = (k >= 1) & (k < branches.count[:, None]) & (jnp.arange(stages)[:, None] <= last_stage)
     near_fold = jnp.any(inside & (jnp.abs(branches.tau_lam) < NEAR_FOLD))
     # the reported states must be configurations of the contact-free model: the critical
-    # state (the start state where the path does not snap) and the landed one
-    crossed = self_intersects(t, scene) | (snaps & landed & self_intersects(ta, scene))
+    # state (the start state where the path does not snap), the landed one, and every
+    # computed point of the stages that decided the path
+    crossed = (self_intersects(t, scene) | (snaps & landed & self_intersects(ta, scene))
+               | jnp.any(inside & branches.crossing))
     result = RESULTS.where(
         ~ok0, start_eq.result,
         RESULTS.where(incomplete, RESULTS.continuation_incomplete,
