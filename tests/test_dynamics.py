@@ -186,3 +186,17 @@ def test_asymmetric_far_half_stays_put_small_n():
     reaches ~19 v* against ~7 v* near the moving clamp, which has already turned over.)"""
     d_left, d_right, _, _ = asymmetric_quarters(N)
     assert d_right > 3 * d_left, (d_left, d_right)
+
+
+def test_second_snap_dynamics_call_compiles_nothing(snap30):
+    """A repeated `snap_dynamics` query runs compiled programs only: the brink start's
+    projection onto the clamp constraint is jitted, not an eager loop compiled anew."""
+    from helpers import count_compiles
+
+    sc, snap = snap30
+    kw = dict(snap=snap, nudge=0.05, t1=0.5)
+    jr.snap_dynamics(sc, "up", **kw)
+    with count_compiles() as c:
+        start, tr = jr.snap_dynamics(sc, "up", **kw)
+    assert c[0] == 0
+    assert np.all(np.isfinite(np.asarray(tr.theta)))

@@ -54,8 +54,10 @@ class Start(eqx.Module):
     ok: jax.Array
 
 
+@eqx.filter_jit
 def project(theta, scene, steps=8):
-    r"""Minimal-norm Gauss-Newton projection onto $\sum_i h_i\mathbf t_i=(G,0)$."""
+    r"""Minimal-norm Gauss-Newton projection onto $\sum_i h_i\mathbf t_i=(G,0)$ (jitted: an
+    eager `fori_loop` over a fresh closure would compile again on every call)."""
     d = discretize(scene)
     target = jnp.stack([scene.clamps.gap, jnp.zeros((), theta.dtype)])
 
