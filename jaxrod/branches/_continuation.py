@@ -32,7 +32,7 @@ from jaxtyping import Array
 from ..linalg import kkt
 from ..energy.geometry import discretize
 from ..energy.contact import self_intersects
-from ..energy.lagrangian import lagrangian, positions
+from ..energy.lagrangian import lagrangian_gradient, positions
 from ..statics import float_scene
 from .._misc import check_bool, check_int, check_number, check_sign, is_concrete
 from ..results import RESULTS
@@ -169,7 +169,7 @@ def _pieces(scene, parameter):
 
     def grad_at(t, m, lam):
         sc = parameter.set(scene, lam)
-        return jax.grad(lagrangian, argnums=(0, 1))(t, m, sc, discretize(sc))
+        return lagrangian_gradient(t, m, sc, discretize(sc))
 
     def F(t, m, lam):
         return grad_at(t, m, lam)

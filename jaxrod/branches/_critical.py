@@ -52,7 +52,7 @@ from jaxtyping import Array
 from ..linalg import batched
 from ._continuation import AbstractParameter, Gap, SymmetricAlpha
 from ..energy.geometry import discretize
-from ..energy.lagrangian import lagrangian, positions
+from ..energy.lagrangian import lagrangian_gradient, positions
 from .._misc import check_int, check_number, is_concrete
 from ..results import RESULTS
 
@@ -81,7 +81,7 @@ class CriticalPoint(eqx.Module):
 
 def _grad(scene, parameter, t, m, a):
     sc = parameter.set(scene, a)
-    return jax.grad(lagrangian, argnums=(0, 1))(t, m, sc, discretize(sc))
+    return lagrangian_gradient(t, m, sc, discretize(sc))
 
 
 def _hvp(scene, parameter, t, m, a, vt, vm):

@@ -31,7 +31,7 @@ from jax import lax
 
 from ..linalg import kkt
 from ..energy.geometry import discretize, scene_dtype
-from ..energy.lagrangian import lagrangian
+from ..energy.lagrangian import lagrangian, lagrangian_gradient
 from .._misc import check_bool, check_int, check_number, run_if
 from ..results import RESULTS
 from ._solution import Equilibrium
@@ -69,7 +69,7 @@ def float_scene(scene):
 
 def _grad_fn(scene):
     d = discretize(scene)
-    return lambda t, m: jax.grad(lagrangian, argnums=(0, 1))(t, m, scene, d)
+    return lambda t, m: lagrangian_gradient(t, m, scene, d)
 
 
 def _residual(g, scene):
@@ -95,7 +95,7 @@ def _newton(scene, theta0, mu0, solver: Newton):
         return lagrangian(t, m, scene, d)
 
     def penalty(t, m):
-        gm = jax.grad(lagrangian, argnums=1)(t, m, scene, d)
+        gm = lagrangian_gradient(t, m, scene, d)[1]
         return 0.5 * jnp.sum(gm**2)
 
     def cond(c):
@@ -234,7 +234,7 @@ def _implicit(theta, mu, scene):
 def _implicit_jvp(primals, tangents):
     theta, mu, scene = primals
     _, _, dscene = tangents
-    d_fn = lambda sc: jax.grad(lagrangian, argnums=(0, 1))(theta, mu, sc)  # noqa: E731
+    d_fn = lambda sc: lagrangian_gradient(theta, mu, sc)  # noqa: E731
     _, (rt, rm) = jax.jvp(d_fn, (scene,), (dscene,))
     K = kkt.structured(theta, mu, scene)
     N = theta.shape[0]
