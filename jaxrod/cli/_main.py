@@ -317,19 +317,50 @@ def _cmd_equilibrium(args):
     return EXIT_OK if rec["converged"] else EXIT_NOT_CONVERGED
 
 
+def _snap_arrays(scene, extrapolate):
+    """What `jaxrod snap-angles` prints, as a flat dict of arrays (one jittable function of
+    the scene, exported by `_exported.call`)."""
+    import jaxrod as jr
+
+    def code(r):
+        return r._value
+
+    out = {}
+    if extrapolate:
+        x = jr.snap_angles_extrapolated(scene)
+        for name in ("up", "down"):
+            e, p = getattr(x, name), getattr(x.fine, name)
+            out.update({f"alpha_c_{name}": e.alpha_c, f"kind_{name}": p.kind,
+                        f"fold_height_before_{name}": e.fold_height_before,
+                        f"fold_height_after_{name}": e.fold_height_after,
+                        f"start_{name}": code(e.start_result), f"result_{name}": code(e.result),
+                        f"alpha_c_{name}_n": e.alpha_c_coarse, f"alpha_c_{name}_n_fine": e.alpha_c_fine,
+                        f"error_{name}": e.error, f"consistent_{name}": e.consistent})
+    else:
+        r = jr.snap_angles(scene)
+        for name in ("up", "down"):
+            p = getattr(r, name)
+            out.update({f"alpha_c_{name}": p.alpha_c, f"kind_{name}": p.kind,
+                        f"fold_height_before_{name}": p.fold_height_before,
+                        f"fold_height_after_{name}": p.fold_height_after,
+                        f"start_{name}": code(p.start_result), f"result_{name}": code(p.result)})
+    return out
+
+
 def _cmd_snap_angles(args):
     scene = make_scene_from_args(args)
+    import functools
+
     import numpy as np
 
     import jaxrod as jr
+    from . import _exported
 
     scene = _array_leaves(scene)
-    if args.extrapolate:
-        x = jr.snap_angles_extrapolated(scene)
-        r = x.fine
-    else:
-        x = None
-        r = jr.snap_angles(scene)
+    # one exported program per (query, mesh): a repeated query traces nothing
+    name = "snap_angles_extrapolated" if args.extrapolate else "snap_angles"
+    out, _ = _exported.call(name, functools.partial(_snap_arrays, extrapolate=bool(args.extrapolate)), scene)
+    out = {k: np.asarray(v) for k, v in out.items()}
 
     def val(x, deg=False):
         x = float(x)
@@ -339,21 +370,20 @@ def _cmd_snap_angles(args):
 
     rec = {"psi0_deg": args.psi0, "gap": args.gap, "s0": args.s0, "n": args.n, "refine": args.refine,
            "extrapolated": bool(args.extrapolate)}
-    if x is not None:
-        rec["n_fine"] = x.n_fine
-    for name, path in (("up", r.up), ("down", r.down)):
-        e = None if x is None else getattr(x, name)
-        rec[f"alpha_c_{name}_deg"] = val(path.alpha_c if e is None else e.alpha_c, deg=True)
-        rec[f"kind_{name}"] = jr.KIND_NAMES[int(path.kind)]
-        rec[f"fold_height_before_{name}"] = val(path.fold_height_before if e is None else e.fold_height_before)
-        rec[f"fold_height_after_{name}"] = val(path.fold_height_after if e is None else e.fold_height_after)
-        rec[f"start_{name}"] = _result_name(path.start_result if e is None else e.start_result)
-        rec[f"result_{name}"] = _result_name(path.result if e is None else e.result)
-        if e is not None:
-            rec[f"alpha_c_{name}_deg_n"] = val(e.alpha_c_coarse, deg=True)
-            rec[f"alpha_c_{name}_deg_n_fine"] = val(e.alpha_c_fine, deg=True)
-            rec[f"error_estimate_{name}_deg"] = val(e.error, deg=True)
-            rec[f"meshes_consistent_{name}"] = bool(e.consistent)
+    if args.extrapolate:
+        rec["n_fine"] = jr.refined_scene(scene).mesh.n
+    for name in ("up", "down"):
+        rec[f"alpha_c_{name}_deg"] = val(out[f"alpha_c_{name}"], deg=True)
+        rec[f"kind_{name}"] = jr.KIND_NAMES[int(out[f"kind_{name}"])]
+        rec[f"fold_height_before_{name}"] = val(out[f"fold_height_before_{name}"])
+        rec[f"fold_height_after_{name}"] = val(out[f"fold_height_after_{name}"])
+        rec[f"start_{name}"] = _result_name(out[f"start_{name}"])
+        rec[f"result_{name}"] = _result_name(out[f"result_{name}"])
+        if args.extrapolate:
+            rec[f"alpha_c_{name}_deg_n"] = val(out[f"alpha_c_{name}_n"], deg=True)
+            rec[f"alpha_c_{name}_deg_n_fine"] = val(out[f"alpha_c_{name}_n_fine"], deg=True)
+            rec[f"error_estimate_{name}_deg"] = val(out[f"error_{name}"], deg=True)
+            rec[f"meshes_consistent_{name}"] = bool(out[f"consistent_{name}"])
     # any code but success (an unknown outcome, a substituted start, a state through itself,
     # meshes that disagree, no derivative) is printed and ends with EXIT_NOT_CONVERGED
     codes = [rec[f"{k}_{name}"] for k in ("result", "start") for name in ("up", "down")]
