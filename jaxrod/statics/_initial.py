@@ -3,9 +3,9 @@ r"""Up and down states built on their own, by homotopy from the flat buckled str
 MODEL.md: the up and down states need not be connected by continuation in alpha, so
 each is built from the flat strip ($\Psi_0=\pi$, $\alpha=0$) buckled up or down at the
 requested gap, then deformed to the requested $(\Psi_0,\alpha_L,\alpha_R)$ (and
-gravity) in `steps` Newton-minimization steps. Three deformation paths are tried at
-once under `vmap` (all parameters together; crease first then clamps; clamps first then
-crease); a path is valid when every step converges to a stable equilibrium whose fold
+gravity) in `steps` Newton-minimization steps. Three deformation paths are tried in
+turn (all parameters together; crease first then clamps; clamps first then crease); a
+path is valid when every step converges to a stable equilibrium whose fold
 height keeps the requested sign and whose angles change by less than pi/2 from the
 previous step (no jump to another branch). The first valid path wins; if none is valid the
 result is `state_not_found` (for example the down state of a tight fold at a large gap,
@@ -106,6 +106,30 @@ def initial_state(scene, state: str = "up", *, steps: int = 24, solver: Newton =
     return flag_contact(initial_state_signed(scene, 1.0 if state == "up" else -1.0, steps=steps, solver=solver))
 
 
+def _flat_start(target, sgn, solver):
+    """The flat strip buckled to the side `sgn` at the target's gap, relaxed: `(scene,
+    equilibrium, valid)`; shared by the three deformation paths."""
+    dtype = scene_dtype(target)
+    s0 = _deformed(target, jnp.zeros((), dtype), jnp.zeros((), dtype))
+    eq0 = solve_unflagged(s0, sgn * buckled_guess(s0, True), None, solver)
+    ok0 = eq0.converged & eq0.stable & (sgn * _fold_height(eq0.theta, eq0.force, s0) > 0)
+    return s0, eq0, ok0
+
+
+def _run_path(target, sgn, kind, eq0, ok0, us, solver):
+    """Deformation path `kind` (0 all together, 1 crease first, 2 clamps first) from the
+    flat start through the homotopy times `us`: `(theta, force, valid)`."""
+    def step(carry, u):
+        t, m, ok = carry
+        uc, ua = _path_params(kind, u)
+        sc = _deformed(target, uc, ua)
+        eq = solve_unflagged(sc, t, m, solver)
+        return (eq.theta, eq.force, ok & still_tracked(eq, sgn, t, sc)), None
+
+    (t, m, ok), _ = lax.scan(step, (eq0.theta, eq0.force, ok0), us)
+    return t, m, ok
+
+
 def _finite(tree):
     """True when every float leaf of `tree` is finite."""
     leaves = jax.tree.leaves(eqx.filter(tree, eqx.is_inexact_array))
@@ -122,27 +146,28 @@ def initial_state_signed(scene, sgn, *, steps: int = 24, solver: Newton = Newton
     sgn = jnp.asarray(sgn, dtype)
     target = lax.stop_gradient(scene)
 
+    s0, eq0, ok0 = _flat_start(target, sgn, solver)
+    us = jnp.arange(1, steps + 1, dtype=dtype) / steps
+
     def run_path(kind):
-        s0 = _deformed(target, jnp.zeros((), dtype), jnp.zeros((), dtype))
-        eq0 = solve_unflagged(s0, sgn * buckled_guess(s0, True), None, solver)
-        ok0 = eq0.converged & eq0.stable & (sgn * _fold_height(eq0.theta, eq0.force, s0) > 0)
+        return _run_path(target, sgn, kind, eq0, ok0, us, solver)
 
-        def step(carry, u):
-            t, m, ok = carry
-            uc, ua = _path_params(kind, u)
-            sc = _deformed(target, uc, ua)
-            eq = solve_unflagged(sc, t, m, solver)
-            return (eq.theta, eq.force, ok & still_tracked(eq, sgn, t, sc)), None
+    # the paths one after another until one is valid: the first valid one in the order
+    # (all together, crease first, clamps first), as if all three ran, at a third of the
+    # work where the first succeeds (under `vmap` the loop runs until every member has one)
+    def cond(c):
+        kind, _, _, found = c
+        return (kind < 3) & ~found
 
-        us = jnp.arange(1, steps + 1, dtype=dtype) / steps
-        (t, m, ok), _ = lax.scan(step, (eq0.theta, eq0.force, ok0), us)
-        return t, m, ok
+    def body(c):
+        kind, _, _, _ = c
+        t, m, ok = run_path(kind)
+        return kind + 1, t, m, ok
 
-    ts, ms, oks = jax.vmap(run_path)(jnp.arange(3))
-    best = jnp.argmax(oks)
-    found = jnp.any(oks)
+    _, t_best, m_best, found = lax.while_loop(
+        cond, body, (jnp.zeros((), jnp.int32), eq0.theta, eq0.force, jnp.zeros((), bool)))
     # final polish on the target scene (also attaches implicit derivatives)
-    eq = solve_unflagged(scene, ts[best], ms[best], solver)
+    eq = solve_unflagged(scene, t_best, m_best, solver)
     good = eq.converged & eq.stable & (sgn * _fold_height(eq.theta, eq.force, eq.scene) > 0)
     result = RESULTS.where(found & good, eq.result,
                            RESULTS.where(eq.converged | ~found, RESULTS.state_not_found, eq.result))
