@@ -446,11 +446,15 @@ def check_path(path, name, case, other=None):
          f"alpha_c {math.degrees(ac) if np.isfinite(ac) else ac} deg, kind {int(path.kind)}, jump {float(path.jump)}")
     event(f"{name}: {short(res)}; start {short(path.start_result)}; snaps {snaps}; kind {int(path.kind)}")
     sc0 = scene(case["psi0"], case["gap"], 0.0, case["s0"], case["n"])
-    check_flag(res, [path.theta_before] + ([path.theta_after] if snaps else []), sc0, where)
+    # the reported states: critical, landed, and every computed point of the stages up to the
+    # deciding one
+    stages = [np.asarray(path.branch.theta[s, :int(path.branch.count[s])]) for s in range(int(path.stage) + 1)]
+    reported = [path.theta_before] + ([path.theta_after] if snaps else []) + [t for st_ in stages for t in st_]
+    check_flag(res, reported, sc0, where)
     if not ok(res):
         return  # flagged
-    c = clearance(path.theta_before, sc0)
-    assert c > 0.5 * CLEAR_TOL, f"{where}: successful, but its critical/end state crosses itself ({c:.3e})"
+    c = min(clearance(t, sc0) for t in reported)
+    assert c > 0.5 * CLEAR_TOL, f"{where}: successful, but a reported state crosses itself ({c:.3e})"
     if not snaps:
         assert np.isnan(ac), f"{where}: successful, no snap, but alpha_c = {ac}"
         assert int(path.kind) == 0, f"{where}: no snap but kind {int(path.kind)}"
@@ -519,12 +523,14 @@ def prop_snap(case):
 @example(dict(n=N_SNAP, psi0=60.0, gap=0.5, s0=0.02))
 @example(dict(n=N_SNAP, psi0=30.0, gap=0.8, s0=0.02))
 @example(dict(n=N_SNAP, psi0=180.0, gap=0.98, s0=0.02))
+@example(dict(n=24, psi0=1.0, gap=0.25, s0=0.125))  # through itself between its start and its snap
 def test_snap_angles_pass_check_or_are_flagged(case):
     """`snap_angles(polish=False)` over (Psi0, G/L, s0) at N = 24, each path: success and a
     snap means a finite alpha_c of the path's sign, |alpha_c| <= pi, a critical state that is
     an equilibrium at alpha_c with a singular dense Hessian (one eigenvalue ~ 0), kind 2 iff
     its null mode is mirror-asymmetric, a stable landed state; success and no snap means
-    alpha_c NaN, kind none."""
+    alpha_c NaN, kind none. `self_intersecting` is confirmed, and success checked, on every
+    reported state: critical, landed, and each computed point of the deciding stages."""
     prop_snap(case)
 
 

@@ -60,7 +60,9 @@ class SnapPath(eqx.Module):
     `stop` (the deciding `Branch.stop`), `refine_result` (the RESULTS code of the extended-system refinement of the
     critical point, `jaxrod.critical_point`; where it fails the bisection values are kept),
     `mode` the critical mode (angle part, unit $L^2$ norm), `jump` the $L^2$ distance of the
-    landed angle field from the critical one (rad; NaN if it does not snap).
+    landed angle field from the critical one (rad; NaN if it does not snap), `stage` the
+    index of the `branch` stage that decided the path (holds the critical point; the stages
+    before it were supercritical branch points).
 
     `result` is the whole path's code: `successful`, or the start state's code where it does
     not exist, `continuation_incomplete`, `landing_failed`, `self_intersecting` (the
@@ -90,6 +92,7 @@ class SnapPath(eqx.Module):
     jump: Array | None = None
     refine_result: RESULTS | None = None
     mode: Array | None = None
+    stage: Array | None = None
 
 
 def _fh(scene, parameter, t, m, lam):
@@ -272,6 +275,7 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
         start_result=start_result,
         stop=stop,
         jump=jnp.where(snaps & landed, dist, nan),
+        stage=last_stage,
     )
 
 
