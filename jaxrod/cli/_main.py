@@ -26,8 +26,9 @@ DEFAULTS = dict(psi0=60.0, gap=0.5, alpha=0.0, s0=0.02, n=100, refine=1.0)
 _EPILOG = """\
 Units: L = B = lambda = 1 (nondimensional); angles in degrees.
 Exit codes: 0 ok, 2 bad input, 3 no converged equilibrium (JSON still printed).
-Compiled code is cached between runs in ~/.cache/jaxrod/xla (or JAX_COMPILATION_CACHE_DIR;
-JAXROD_NO_CACHE=1 disables it): the first run of a command compiles for up to a minute."""
+Compiled code is cached between runs in ~/.cache/jaxrod/xla (or JAX_COMPILATION_CACHE_DIR),
+and snap-angles' lowered program in ~/.cache/jaxrod/exported; JAXROD_NO_CACHE=1 disables
+both. The first run of a command compiles for up to a minute."""
 
 
 # modules that register more subcommands (see `_build_parser`)
