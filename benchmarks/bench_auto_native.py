@@ -372,6 +372,24 @@ def extrapolated(n):
     return out
 
 
+MATCHED_CANDIDATES = (40, 50, 60, 70, 80)
+"""Coarse meshes tried, in order, for jaxrod's matched-accuracy row (extrapolated from n and 2n)."""
+
+
+def matched_n(ref, log):
+    """The smallest n of `MATCHED_CANDIDATES` whose extrapolation (n + 2n) is within
+    `ACCURACY_DEG` of the reference with the reference's kinds on both paths, chosen the way
+    AUTO's NTST is: `(n, result)`, or `(None, None)`."""
+    for n in MATCHED_CANDIDATES:
+        r = _block(jr.snap_angles_extrapolated(scene(n)))
+        errs = [abs(math.degrees(float(getattr(r, p).alpha_c)) - ref[p]["alpha_c_deg"]) for p in ("up", "down")]
+        kinds = all(jr.KIND_NAMES[int(getattr(r, p).kind)] == ref[p]["kind"] for p in ("up", "down"))
+        log(f"  matched accuracy: n = {n} + {2 * n}: errors {errs[0]:.1e} / {errs[1]:.1e} deg, kinds ok {kinds}")
+        if kinds and max(errs) <= ACCURACY_DEG:
+            return n, r
+    return None, None
+
+
 def jaxrod_extrapolated_fn():
     return jax.jit(lambda s: jr.snap_angles_extrapolated(s))
 
@@ -459,7 +477,11 @@ def write_md(res, path):
              f"{ra['paths']['down']['alpha_c_deg']:.6f} ({ra['paths']['down']['found']}, "
              f"{ra['paths']['down']['error_deg']:+.1e}) | {a_t['solver_ms']:.0f} | {a_t['with_build_s']:.2f} | | |")
     L.append(f"| AUTO-07p, same, whole Python driver | | | {a_t['wall_ms']:.0f} | {a_t['wall_with_build_s']:.2f} | | |")
+    mt = t.get("matched")
+    matched_label = (f"jaxrod `snap_angles_extrapolated`, n = {mt['N']} + {mt['N_fine']} (the smallest uniform "
+                     f"mesh within {ACCURACY_DEG} deg)" if mt else "")
     for key, label in (("extrapolated", f"jaxrod `snap_angles_extrapolated`, n = {N_JAXROD} + {2 * N_JAXROD}"),
+                       ("matched", matched_label),
                        ("plain", f"jaxrod `snap_angles`, n = {res['n_plain']}")):
         j = t.get(key)
         if j is None:
@@ -612,9 +634,17 @@ def main(argv=None):
             variants.append(row)
         res["auto_variants"] = variants
 
+        # jaxrod at matched accuracy: the smallest uniform mesh within the accuracy
+        n_m, r_m = matched_n(ref, log)
+        sc_m = scene(n_m) if n_m is not None else None
+        if sc_m is not None:
+            t0 = time.perf_counter()
+            _block(f_ex(sc_m))
+            first_m = time.perf_counter() - t0
+
         # timing, AUTO and jaxrod alternating
         log(f"timing ({reps} repeats, alternating):")
-        ta, tw, tcpu, tj = [], [], [], []
+        ta, tw, tcpu, tj, tm = [], [], [], [], []
         last = None
         for _ in range(reps):
             a = auto_snap_angles(exe, td / "timing", nt)
@@ -625,6 +655,10 @@ def main(argv=None):
             t0 = time.perf_counter()
             _block(f_ex(sc))
             tj.append(time.perf_counter() - t0)
+            if sc_m is not None:
+                t0 = time.perf_counter()
+                _block(f_ex(sc_m))
+                tm.append(time.perf_counter() - t0)
         last = _errors(last, ref)
         res["auto_at_ntst"] = last
         res["auto_start_check"] = dict(
@@ -653,6 +687,17 @@ def main(argv=None):
         ex[f"{p}_error_deg"] = ex[f"{p}_deg"] - ref[p]["alpha_c_deg"]
     log(f"  jaxrod extrapolated n={N_JAXROD}: {j_med:.0f} ms (min {j_min:.0f}); first call {first_ex:.1f} s")
     timing = dict(repeats=reps, auto=auto_t, extrapolated=ex)
+    if sc_m is not None:
+        m_med, m_min = _median_ms(tm)
+        mt = dict(N=n_m, N_fine=2 * n_m, first_call_s=first_m, median_ms=m_med, min_ms=m_min,
+                  all_ms=[1e3 * x for x in tm])
+        for p in ("up", "down"):
+            q = getattr(r_m, p)
+            mt[f"{p}_deg"] = math.degrees(float(q.alpha_c))
+            mt[f"{p}_kind"] = jr.KIND_NAMES[int(q.kind)]
+            mt[f"{p}_error_deg"] = mt[f"{p}_deg"] - ref[p]["alpha_c_deg"]
+        timing["matched"] = mt
+        log(f"  jaxrod extrapolated n={n_m}: {m_med:.0f} ms (min {m_min:.0f})")
 
     if not args.quick:
         sc8 = scene(N_PLAIN)
@@ -680,7 +725,7 @@ def main(argv=None):
     res["timing"] = timing
     res["auto_settings"] = dict(formulation="folded", **SETTINGS, DS=STAGE_DS, NTST=res["auto_ntst"])
     res["ratios"] = {}
-    for key in ("extrapolated", "plain"):
+    for key in ("extrapolated", "matched", "plain"):
         j = timing.get(key)
         if j is None:
             continue
