@@ -394,6 +394,18 @@ def jaxrod_extrapolated_fn():
     return jax.jit(lambda s: jr.snap_angles_extrapolated(s))
 
 
+def _jaxrod_row(n, r, first_s, times, ref):
+    """A jaxrod timing row: the extrapolated result `r` at n + 2n, its first call and run times."""
+    med, mn = _median_ms(times)
+    row = dict(N=n, N_fine=2 * n, first_call_s=first_s, median_ms=med, min_ms=mn, all_ms=[1e3 * x for x in times])
+    for p in ("up", "down"):
+        q = getattr(r, p)
+        row[f"{p}_deg"] = math.degrees(float(q.alpha_c))
+        row[f"{p}_kind"] = jr.KIND_NAMES[int(q.kind)]
+        row[f"{p}_error_deg"] = row[f"{p}_deg"] - ref[p]["alpha_c_deg"]
+    return row
+
+
 def _median_ms(ts):
     return 1e3 * float(np.median(ts)), 1e3 * float(np.min(ts))
 
@@ -671,33 +683,19 @@ def main(argv=None):
             down_fold_height_before=last["paths"]["down"]["fold_height_before"])
         a_med, a_min = _median_ms(ta)
         w_med, w_min = _median_ms(tw)
-        j_med, j_min = _median_ms(tj)
         auto_t = dict(NTST=nt, solver_ms=a_med, solver_min_ms=a_min, wall_ms=w_med, wall_min_ms=w_min,
                       auto_total_time_ms=1e3 * float(np.nanmedian(tcpu)), build_s=build_s,
                       with_build_s=build_s + a_med / 1e3, wall_with_build_s=build_s + w_med / 1e3,
                       runs=last["runs"], points=last["points"], solver_all_ms=[1e3 * x for x in ta])
         log(f"  AUTO NTST={nt}: processes {a_med:.0f} ms (min {a_min:.0f}), driver wall {w_med:.0f} ms")
 
-    ex = dict(N=N_JAXROD, N_fine=2 * N_JAXROD, first_call_s=first_ex, median_ms=j_med, min_ms=j_min,
-              all_ms=[1e3 * x for x in tj])
-    for p in ("up", "down"):
-        q = getattr(r_ex, p)
-        ex[f"{p}_deg"] = math.degrees(float(q.alpha_c))
-        ex[f"{p}_kind"] = jr.KIND_NAMES[int(q.kind)]
-        ex[f"{p}_error_deg"] = ex[f"{p}_deg"] - ref[p]["alpha_c_deg"]
-    log(f"  jaxrod extrapolated n={N_JAXROD}: {j_med:.0f} ms (min {j_min:.0f}); first call {first_ex:.1f} s")
+    ex = _jaxrod_row(N_JAXROD, r_ex, first_ex, tj, ref)
+    log(f"  jaxrod extrapolated n={N_JAXROD}: {ex['median_ms']:.0f} ms (min {ex['min_ms']:.0f}); "
+        f"first call {first_ex:.1f} s")
     timing = dict(repeats=reps, auto=auto_t, extrapolated=ex)
     if sc_m is not None:
-        m_med, m_min = _median_ms(tm)
-        mt = dict(N=n_m, N_fine=2 * n_m, first_call_s=first_m, median_ms=m_med, min_ms=m_min,
-                  all_ms=[1e3 * x for x in tm])
-        for p in ("up", "down"):
-            q = getattr(r_m, p)
-            mt[f"{p}_deg"] = math.degrees(float(q.alpha_c))
-            mt[f"{p}_kind"] = jr.KIND_NAMES[int(q.kind)]
-            mt[f"{p}_error_deg"] = mt[f"{p}_deg"] - ref[p]["alpha_c_deg"]
-        timing["matched"] = mt
-        log(f"  jaxrod extrapolated n={n_m}: {m_med:.0f} ms (min {m_min:.0f})")
+        mt = timing["matched"] = _jaxrod_row(n_m, r_m, first_m, tm, ref)
+        log(f"  jaxrod extrapolated n={n_m}: {mt['median_ms']:.0f} ms (min {mt['min_ms']:.0f})")
 
     if not args.quick:
         sc8 = scene(N_PLAIN)
