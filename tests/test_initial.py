@@ -14,7 +14,7 @@ from jaxrod.statics._equilibrium import Newton
 def path_validity(scene, sgn):
     """Whether each of the three deformation paths reaches a valid state."""
     scene = _initial.float_scene(scene)
-    s0, eq0, ok0 = _initial._flat_start(scene, sgn, Newton())
+    eq0, ok0 = _initial._flat_start(scene, sgn, Newton())
     us = jnp.arange(1, 25, dtype=scene.strip.psi0.dtype) / 24
     return jnp.stack([_initial._run_path(scene, sgn, k, eq0, ok0, us, Newton())[2] for k in range(3)])
 
@@ -28,7 +28,7 @@ def test_state_only_the_last_path_reaches():
     assert eq.result == jr.RESULTS.successful
     assert bool(eq.stable) and float(jr.fold_height(eq)) < 0
     # and the same state as the third path's end, polished
-    s0, eq0, ok0 = _initial._flat_start(_initial.float_scene(sc), -1.0, Newton())
+    eq0, ok0 = _initial._flat_start(_initial.float_scene(sc), -1.0, Newton())
     t, m, _ = _initial._run_path(_initial.float_scene(sc), -1.0, 2, eq0, ok0,
                                  jnp.arange(1, 25, dtype=jnp.float64) / 24, Newton())
     np.testing.assert_allclose(eq.theta, t, atol=1e-6)

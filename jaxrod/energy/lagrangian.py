@@ -124,9 +124,9 @@ def hessian_blocks(theta, mu, scene, d=None):
     W, inv_K = _segment_data(scene, d)
     a, a_t, c, s, hk = _segment_derivatives(theta, mu, d, W, inv_K)
     hK = d.h * inv_K
-    g = (a_t, -c, -s)
+    # rows of h_i [(1 - a_i/K) A_i - g_i g_i^T / K], g_i = (a_t, -c, -s): theta-theta and theta-mu
     h_tt = -hk * a - hK * a_t * a_t
-    border = jnp.stack([hk * s - hK * a_t * g[1], -hk * c - hK * a_t * g[2]], -1)
+    border = jnp.stack([hk * s + hK * a_t * c, -hk * c + hK * a_t * s], -1)
     corner = -jnp.stack([jnp.stack([jnp.sum(hK * c * c), jnp.sum(hK * c * s)]),
                          jnp.stack([jnp.sum(hK * c * s), jnp.sum(hK * s * s)])])
     diag = kb[:-1] + kb[1:] + h_tt

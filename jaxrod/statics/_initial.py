@@ -107,13 +107,13 @@ def initial_state(scene, state: str = "up", *, steps: int = 24, solver: Newton =
 
 
 def _flat_start(target, sgn, solver):
-    """The flat strip buckled to the side `sgn` at the target's gap, relaxed: `(scene,
-    equilibrium, valid)`; shared by the three deformation paths."""
+    """The flat strip buckled to the side `sgn` at the target's gap, relaxed: `(equilibrium,
+    valid)`; shared by the three deformation paths."""
     dtype = scene_dtype(target)
     s0 = _deformed(target, jnp.zeros((), dtype), jnp.zeros((), dtype))
     eq0 = solve_unflagged(s0, sgn * buckled_guess(s0, True), None, solver)
     ok0 = eq0.converged & eq0.stable & (sgn * _fold_height(eq0.theta, eq0.force, s0) > 0)
-    return s0, eq0, ok0
+    return eq0, ok0
 
 
 def _run_path(target, sgn, kind, eq0, ok0, us, solver):
@@ -146,11 +146,8 @@ def initial_state_signed(scene, sgn, *, steps: int = 24, solver: Newton = Newton
     sgn = jnp.asarray(sgn, dtype)
     target = lax.stop_gradient(scene)
 
-    s0, eq0, ok0 = _flat_start(target, sgn, solver)
+    eq0, ok0 = _flat_start(target, sgn, solver)
     us = jnp.arange(1, steps + 1, dtype=dtype) / steps
-
-    def run_path(kind):
-        return _run_path(target, sgn, kind, eq0, ok0, us, solver)
 
     # the paths one after another until one is valid: the first valid one in the order
     # (all together, crease first, clamps first), as if all three ran, at a third of the
@@ -161,7 +158,7 @@ def initial_state_signed(scene, sgn, *, steps: int = 24, solver: Newton = Newton
 
     def body(c):
         kind, _, _, _ = c
-        t, m, ok = run_path(kind)
+        t, m, ok = _run_path(target, sgn, kind, eq0, ok0, us, solver)
         return kind + 1, t, m, ok
 
     _, t_best, m_best, found = lax.while_loop(
