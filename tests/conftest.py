@@ -1,14 +1,14 @@
-"""Test configuration: float64 everywhere (set before any array is created), no persistent
-XLA compilation cache unless asked for, and the slowest modules first.
+"""Test configuration: float64 everywhere (set before any array is created), one persistent
+XLA compilation cache for the run, and the slowest modules first.
 
-Persistent cache: off by default. With it on (JAXROD_TEST_XLA_CACHE=1), the xdist workers,
-the notebook kernels and the CLI subprocesses share JAX's persistent cache (by default the
-CLI's `~/.cache/jaxrod/xla`; JAX_COMPILATION_CACHE_DIR picks another): a fresh-clone run
-took 1419 s instead of 1829 s (2026-12-03, same 2-core machine), and a warm rerun 670 s.
-It was turned off after a CI run died of a segfault inside XLA's `deserialize_executable`
-reading it; that crash turned out to be the mapping limit below, not the cache (reading
-cached programs at a lowered `vm.max_map_count` segfaults in the same frame), but CI keeps
-the configuration that was verified end to end without it.
+Persistent cache: on by default (JAXROD_TEST_XLA_CACHE=0 turns it off), in the checkout's
+`.xla_cache/xla` (git-ignored; JAX_COMPILATION_CACHE_DIR picks another): the xdist workers, the
+notebook kernels and the CLI subprocesses of one run share every compiled program, so a
+program that several test modules build (snap_angles at a given N and settings, the
+dynamics of a scene) is compiled once per run instead of once per module and worker. A fresh
+clone starts with it empty, so CI's time counts every compile once. Reading cached programs
+at a process's mapping limit segfaults like compiling does; the release below keeps the
+workers far from it.
 The environment variables are set before jax and equinox are imported so that child
 processes inherit them.
 
@@ -31,17 +31,18 @@ alone at the end."""
 import gc
 import os
 
-XLA_CACHE = os.environ.get("JAXROD_TEST_XLA_CACHE", "0") == "1"
+XLA_CACHE = os.environ.get("JAXROD_TEST_XLA_CACHE", "1") == "1"
 if XLA_CACHE:
-    os.environ.setdefault(
-        "JAX_COMPILATION_CACHE_DIR",
-        os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "jaxrod", "xla"),
-    )
+    _root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(_root, ".xla_cache", "xla"))
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.3")
     os.makedirs(os.environ["JAX_COMPILATION_CACHE_DIR"], exist_ok=True)
 else:
     os.environ.pop("JAX_COMPILATION_CACHE_DIR", None)  # child processes read it too
-    os.environ["JAXROD_NO_CACHE"] = "1"  # the CLI subprocesses' own cache
+# The CLI's exported programs stay off either way (their key does not see a monkeypatched
+# library function; `test_exported.py` turns them on in its own directory). The CLI
+# subprocesses still share the XLA cache: JAX reads JAX_COMPILATION_CACHE_DIR itself.
+os.environ["JAXROD_NO_CACHE"] = "1"
 # JAX does not persist a program with host callbacks, and equinox's runtime checks
 # (`eqx.error_if`, raised through a callback by default) are callbacks: diffrax checks its
 # save times that way, which kept every `jaxrod.simulate` program out of the cache. Those

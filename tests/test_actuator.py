@@ -79,6 +79,7 @@ def test_program_rechecked_at_finer_mesh(program, moves):
         assert np.max(np.abs(np.subtract(c.h_final, f.h_final))) < 0.01
 
 
+@pytest.mark.slow  # 66 s; CI checks the quasi-static program and the dynamics of each snap kind elsewhere
 def test_dynamic_program_small_n(program, moves):
     """jr.simulate through the same waypoints (damped, clamps ramped at 1 rad/T): after each move
     the strip has settled in the intended state, on the quasi-static end state, and during the

@@ -110,6 +110,7 @@ def study_c():
     return ds.snap_speed_study(20.0, 90.0, n=N, n_check=N_CHECK, max_iter=10, progress=False)
 
 
+@pytest.mark.slow  # 60 s of compiling the design loop; CI checks its Jacobian (the custom JVP) against FD
 def test_study_c_reaches_20_and_the_finer_check_agrees(study_c):
     r = study_c
     assert r.reached, r.message
@@ -121,6 +122,7 @@ def test_study_c_reaches_20_and_the_finer_check_agrees(study_c):
     assert "target reached" in r.message
 
 
+@pytest.mark.slow  # the same compiled problem as study (c)
 def test_cli_design_target_speed_json(study_c, capsys):
     # same problem as the study (compiled once per process)
     code = main(["design", "--target-speed", "20", "--psi0", "90", "--n", str(N), "--check-n", str(N_CHECK),

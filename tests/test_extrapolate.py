@@ -18,6 +18,7 @@ from jaxrod.branches._extrapolate import _combine
 jax.config.update("jax_enable_x64", True)
 
 
+@pytest.mark.slow  # 40-50 s each (N = 200 and 400 compiled); CI checks the combination and the CLI's default
 @pytest.mark.parametrize("psi0, gap", [(60.0, 0.5), (30.0, 0.6)])
 def test_extrapolation_agrees_with_finer_meshes(psi0, gap):
     """R(100, 200) against the independent R(200, 400) (N = 400 solved on its own): they

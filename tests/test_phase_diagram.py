@@ -206,6 +206,7 @@ def test_vmap_mode_computes_missing_chunks_in_one_call(tmp_path, monkeypatch):
         jr.phase_diagram([60.0], gaps, progress=False, batch="loop")
 
 
+@pytest.mark.slow  # 66 s on 2 cores; the chunked mode it is compared with is checked against single calls in CI
 def test_one_vmapped_call_equals_the_chunks():
     """The real computation as one jitted, vmapped call over Psi0 (`batch="vmap"`; batched
     linear algebra through `jaxrod.linalg.batched`, the homotopy fallback a masked while loop)

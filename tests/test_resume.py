@@ -100,6 +100,7 @@ def _pd_args(out):
             "--no-termination", "--json"]
 
 
+@pytest.mark.slow  # 63 s (three CLI processes); CI checks resuming from finished, torn and foreign chunks in-process
 def test_phase_diagram_sigkill_resume(tmp_path):
     """Killed after its first chunk, the rerun reads the finished chunks back (files not
     rewritten: same hash and mtime; the CLI reports them as not computed), recomputes a

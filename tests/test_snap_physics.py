@@ -342,6 +342,7 @@ GRID_PSI0 = (30.0, 60.0, 90.0, 120.0, 180.0)
 GRID_GAPS = np.round(np.arange(0.1, 0.9 + 1e-9, 0.02), 10)
 
 
+@pytest.mark.slow  # 66 s; CI checks the walks of single paths (test_no_missed_instability_dense)
 def test_phase_diagram_walks_miss_no_instability():
     """No missed branch point (or fold) anywhere on the phase-diagram grid (5 Psi0 x 41
     gaps, N = 100), on the walks `phase_diagram` itself makes (its warm-started chunks, the
