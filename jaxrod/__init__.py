@@ -81,10 +81,13 @@ from .branches import LeftAlpha as LeftAlpha
 from .branches import phase_diagram as phase_diagram
 from .branches import refined_scene as refined_scene
 from .branches import RightAlpha as RightAlpha
+from .branches import Route as Route
 from .branches import snap_angles as snap_angles
 from .branches import snap_angles_extrapolated as snap_angles_extrapolated
 from .branches import SnapAngles as SnapAngles
 from .branches import SnapPath as SnapPath
+from .branches import snap_routes as snap_routes
+from .branches import SnapRoutes as SnapRoutes
 from .branches import SymmetricAlpha as SymmetricAlpha
 from .branches import termination_gap as termination_gap
 from .branches import TerminationGap as TerminationGap

@@ -26,7 +26,7 @@ def snap30():
 @pytest.fixture(scope="module")
 def brink_run(snap30):
     sc, snap = snap30
-    start = jr.brink(sc, "up", snap=snap, nudge=0.05)
+    start = jr.brink(sc, "up", snap=snap)
     # the adaptive explicit path (the default, RATTLE, is in test_rattle.py); tolerances as
     # arrays: one compilation for all three (Python floats would be static)
     runs = {tol: jr.simulate(start.scene, start.theta0, start.protocol, direction=1.0, t1=3.0, solver="tsit5",
@@ -91,7 +91,7 @@ def test_energy_trade_at_snap(brink_run):
 
 def test_damping_dissipates(snap30):
     sc, snap = snap30
-    start = jr.brink(sc, "up", snap=snap, nudge=0.05)
+    start = jr.brink(sc, "up", snap=snap)
     free = jr.simulate(start.scene, start.theta0, start.protocol, direction=1.0, t1=3.0)
     damped = jr.simulate(start.scene, start.theta0, start.protocol, direction=1.0, t1=3.0,
                          dissipation=jr.Dissipation(damping=2.0))
@@ -194,7 +194,7 @@ def test_second_snap_dynamics_call_compiles_nothing(snap30):
     from helpers import count_compiles
 
     sc, snap = snap30
-    kw = dict(snap=snap, nudge=0.05, t1=0.5)
+    kw = dict(snap=snap, t1=0.5)
     jr.snap_dynamics(sc, "up", **kw)
     with count_compiles() as c:
         start, tr = jr.snap_dynamics(sc, "up", **kw)

@@ -59,7 +59,7 @@ def test_vs_converges_with_n():
     tol = jnp.asarray(1e-8)
     for n in (12, 16, 24):
         sc = jr.make_scene(30, 0.5, 0, n=n, s0=0.1)
-        _, tr = jr.snap_dynamics(sc, "up", nudge=0.05, rtol=tol, atol=tol, t1=jnp.asarray(3.0))
+        _, tr = jr.snap_dynamics(sc, "up", rtol=tol, atol=tol, t1=jnp.asarray(3.0))
         assert bool(tr.snapped)
         v.append(float(tr.v_s))
     d1, d2 = abs(v[1] - v[0]), abs(v[2] - v[1])
@@ -70,7 +70,7 @@ def test_vs_converges_with_n():
 def test_brink_and_slow_ramp_agree():
     sc = jr.make_scene(30, 0.5, 0, n=32)
     snap = jr.snap_angles(sc)
-    _, b = jr.snap_dynamics(sc, "up", kind="brink", nudge=0.05, snap=snap, rtol=1e-7, atol=1e-7, t1=3.0)
+    _, b = jr.snap_dynamics(sc, "up", kind="brink", snap=snap, rtol=1e-7, atol=1e-7, t1=3.0)
     _, r = jr.snap_dynamics(sc, "up", kind="ramp", rate=0.2, seed=1e-3, snap=snap, rtol=1e-7, atol=1e-7, t1=3.0)
     assert bool(b.snapped) and bool(r.snapped)
     assert abs(float(r.v_s) / float(b.v_s) - 1) < 0.03, (float(r.v_s), float(b.v_s))

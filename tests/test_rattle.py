@@ -19,7 +19,7 @@ N = 24
 @pytest.fixture(scope="module")
 def brink24():
     sc = jr.make_scene(30, 0.5, 0, n=N)
-    return jr.brink(sc, "up", nudge=0.05)
+    return jr.brink(sc, "up")
 
 
 def _run(start, **kw):

@@ -93,6 +93,16 @@ def test_cli_snap_angles_json(snap, capsys):
     assert abs(rec["alpha_c_down_deg"] - np.degrees(float(r.down.alpha_c))) < 1e-9
     assert rec["extrapolated"] is False
     assert rec["kind_up"] in ("fold", "branch_point") and rec["kind_down"] in ("fold", "branch_point")
+    # the second critical point of each path (jr.snap_routes) and the clearance of its states
+    routes = jr.snap_routes(jr.make_scene(60.0, 0.5, n=100), snap=r)
+    for name in ("up", "down"):
+        q = getattr(routes, name)
+        assert rec[f"kind2_{name}"] == jr.KIND_NAMES[int(q.kind2)]
+        a2 = rec[f"alpha_c2_{name}_deg"]
+        assert (a2 is None) == bool(np.isnan(float(q.alpha_c2)))
+        assert a2 is None or abs(a2 - np.degrees(float(q.alpha_c2))) < 1e-9
+        assert 0.0 < rec[f"clearance_{name}"] < 0.5
+    assert rec["kind_up"] == "branch_point" and rec["kind2_up"] == "fold"
     # the down state does not exist at alpha = 0 here: the up path starts from the snap-down
     # path's end, which the CLI prints and flags with exit code 3
     assert main(["snap-angles", "--psi0", "30", "--gap", "0.8", "--json"]) == 3

@@ -2,7 +2,8 @@
 
 Pseudo-arclength continuation in a clamp angle or the gap (`continue_branch`), the fold /
 branch point where a path loses stability (`critical_point`, `cusp_point`), the snap angles
-of both directions (`snap_angles`, `snap_angles_extrapolated`), the gap where snapping ends
+of both directions (`snap_angles`, `snap_angles_extrapolated`) and the critical point past
+each (`snap_routes`), the gap where snapping ends
 (`termination_gap`), the critical curve in (G/L, alpha) (`continue_critical`), the whole
 hysteresis loop (`hysteresis`) and the phase diagram over (Psi0, G/L) (`phase_diagram`).
 
@@ -32,6 +33,9 @@ from ._hysteresis import Hysteresis as Hysteresis
 from ._hysteresis import hysteresis as hysteresis
 from ._phase import phase_diagram as phase_diagram
 from ._phase import termination_gaps as termination_gaps
+from ._routes import Route as Route
+from ._routes import snap_routes as snap_routes
+from ._routes import SnapRoutes as SnapRoutes
 from ._snap import follow_path as follow_path
 from ._snap import KIND_NAMES as KIND_NAMES
 from ._snap import NEAR_FOLD as NEAR_FOLD

@@ -18,10 +18,12 @@ point recomputed.
 from __future__ import annotations
 
 import csv
+import functools
 import json
 import math
 import os
 
+from ..dynamics import NUDGE
 from ..results import RESULTS
 from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _result_name, add_scene_args, make_scene_from_args)
 
@@ -31,7 +33,8 @@ PAPER_FIT = (42.59, 30.38, 5.00)
 def _add_run_args(p):
     g = p.add_argument_group("dynamics")
     g.add_argument("--direction", choices=("up", "down"), default="up", help="snap up or down (default up)")
-    g.add_argument("--nudge", type=float, default=0.05, help="brink: nudge along the unstable mode, rad (default 0.05)")
+    g.add_argument("--nudge", type=float, default=NUDGE,
+                   help=f"brink: nudge along the unstable mode, rad RMS (default {NUDGE})")
     g.add_argument("--rate", type=float, default=0.5, help="ramp/asymmetric: clamp rate, rad per T (default 0.5)")
     g.add_argument("--solver", default="rattle",
                    help="rattle (default: fixed step, symplectic), tsit5, dopri5, dopri8, kvaerno3, kvaerno5")
@@ -47,6 +50,9 @@ def register(sub):
     p.add_argument("--scene", choices=("brink", "ramp", "asymmetric"), default="brink",
                    help="brink (critical state nudged), ramp (clamps rotated through alpha_c), asymmetric "
                         "(only the right clamp rotated from --alpha-right, left held at --alpha)")
+    p.add_argument("--route", choices=("first", "second"), default="first",
+                   help="brink: start at the critical point where the path snaps (first, default) or at the "
+                        "next one of its branch past a branch point (second; jaxrod.snap_routes)")
     _add_run_args(p)
     m = p.add_argument_group("physical units (all five to report m/s and s)")
     for name in ("youngs-modulus", "density", "thickness", "width", "length"):
@@ -106,7 +112,9 @@ def run_snap(scene, args, kind):
             start, tr = jr.snap_dynamics(scene, args.direction, kind="asymmetric", rate=args.rate,
                                          alpha_start=float(scene.clamps.alpha_right), **kw)
         else:
-            start, tr = jr.snap_dynamics(scene, args.direction, kind=kind, nudge=args.nudge, rate=args.rate, **kw)
+            route = getattr(args, "route", "first") if kind == "brink" else "first"
+            start, tr = jr.snap_dynamics(scene, args.direction, kind=kind, nudge=args.nudge, rate=args.rate,
+                                         route=route, **kw)
     except ValueError as e:
         raise InputError(str(e)) from None
     return start, tr
@@ -151,12 +159,38 @@ def _record(start, tr, phys=None):
     return rec
 
 
+def _clearance(scene, tr):
+    """The smallest clearance over the run's frames (segments at least N/10 apart, as
+    `jaxrod snap-angles` reports it), in L; NaN without a finite frame."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    import jaxrod as jr
+
+    from ._main import CLEARANCE_SEPARATION
+
+    import equinox as eqx
+
+    th = np.asarray(tr.theta)
+    th = th[np.all(np.isfinite(th), axis=1)]  # frames after the run's stop are inf
+    if not th.size:
+        return float("nan")
+    m = max(2, -(-scene.mesh.n // CLEARANCE_SEPARATION))
+    # one compiled program for all frames (a CLI run calls this once)
+    c = eqx.filter_jit(jax.vmap(functools.partial(jr.clearance, min_separation=m), in_axes=(0, None)))(
+        jnp.asarray(th), scene)
+    return float(np.min(np.asarray(c))) / float(scene.strip.length)
+
+
 def _cmd_snap(args):
     _check_run_args(args)
     phys = _physical(args)
     scene = _array_leaves(make_scene_from_args(args))
     start, tr = run_snap(scene, args, args.scene)
     rec = _record(start, tr, phys)
+    c = _clearance(start.scene, tr)
+    rec["clearance"] = c if math.isfinite(c) else None
     import jaxrod as jr
 
     from ..plot import animate_snap, plot_snap

@@ -114,7 +114,12 @@ def _build_parser():
                        description="Continue the down state (alpha increasing) and the up state (alpha\n"
                                    "decreasing) under symmetric clamp rotation and report where each loses\n"
                                    "stability (alpha_c), of what kind (fold or branch_point), and the fold\n"
-                                   "height just before and after. --alpha is ignored (the loop starts at 0).",
+                                   "height just before and after; past a branch point, the next critical\n"
+                                   "point of the same branch (alpha_c2, kind2: the route a fast ramp of a\n"
+                                   "nearly perfect strip takes, jaxrod.snap_routes); the clearance of the\n"
+                                   "reported states (smallest distance between segments at least N/10 apart\n"
+                                   "along the strip, in L).\n"
+                                   "--alpha is ignored (the loop starts at 0).",
                        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_scene_args(q)
     q.add_argument("--no-extrapolate", dest="extrapolate", action="store_false",
@@ -318,33 +323,60 @@ def _cmd_equilibrium(args):
     return EXIT_OK if rec["converged"] else EXIT_NOT_CONVERGED
 
 
+CLEARANCE_SEPARATION = 10
+"""`jaxrod snap-angles` reports the clearance between segments at least N / 10 apart."""
+
+
 def _snap_arrays(scene, extrapolate):
     """What `jaxrod snap-angles` prints, as a flat dict of arrays (one jittable function of
     the scene, exported by `_exported.call`)."""
+    import jax.numpy as jnp
+
     import jaxrod as jr
 
     def code(r):
         return r._value
 
+    def clearance(p, sc):
+        # the smallest distance between segments at least N/10 apart along the strip (nearer
+        # pairs are bounded by their arclength, see jaxrod.clearance) over the reported states
+        # (critical and landed), in L
+        m = max(2, -(-sc.mesh.n // CLEARANCE_SEPARATION))
+        c = [jr.clearance(p.theta_before, sc, force=p.force_before, min_separation=m),
+             jr.clearance(p.theta_after, sc, force=p.force_after, min_separation=m)]
+        c = jnp.stack([jnp.where(jnp.isfinite(x), x, jnp.inf) for x in c])
+        return jnp.where(p.snaps, jnp.min(c), c[0]) / sc.strip.length
+
     out = {}
     if extrapolate:
         x = jr.snap_angles_extrapolated(scene)
+        sc_f = jr.refined_scene(scene, x.n_fine // x.n_coarse)
+        rc, rf = jr.snap_routes(scene, snap=x.coarse), jr.snap_routes(sc_f, snap=x.fine)
         for name in ("up", "down"):
             e, p = getattr(x, name), getattr(x.fine, name)
+            c2, f2 = getattr(rc, name), getattr(rf, name)
+            both = (c2.kind2 == f2.kind2) & (f2.kind2 != 0)
+            r = (x.n_fine // x.n_coarse) ** 2 - 1  # Richardson on the second-order mesh
+            a2 = jnp.where(both, f2.alpha_c2 + (f2.alpha_c2 - c2.alpha_c2) / r, f2.alpha_c2)
             out.update({f"alpha_c_{name}": e.alpha_c, f"kind_{name}": p.kind,
                         f"fold_height_before_{name}": e.fold_height_before,
                         f"fold_height_after_{name}": e.fold_height_after,
                         f"start_{name}": code(e.start_result), f"result_{name}": code(e.result),
                         f"alpha_c_{name}_n": e.alpha_c_coarse, f"alpha_c_{name}_n_fine": e.alpha_c_fine,
-                        f"error_{name}": e.error, f"consistent_{name}": e.consistent})
+                        f"error_{name}": e.error, f"consistent_{name}": e.consistent,
+                        f"alpha_c2_{name}": a2, f"kind2_{name}": f2.kind2, f"result2_{name}": code(f2.result),
+                        f"clearance_{name}": clearance(p, sc_f)})
     else:
         r = jr.snap_angles(scene)
+        routes = jr.snap_routes(scene, snap=r)
         for name in ("up", "down"):
-            p = getattr(r, name)
+            p, q = getattr(r, name), getattr(routes, name)
             out.update({f"alpha_c_{name}": p.alpha_c, f"kind_{name}": p.kind,
                         f"fold_height_before_{name}": p.fold_height_before,
                         f"fold_height_after_{name}": p.fold_height_after,
-                        f"start_{name}": code(p.start_result), f"result_{name}": code(p.result)})
+                        f"start_{name}": code(p.start_result), f"result_{name}": code(p.result),
+                        f"alpha_c2_{name}": q.alpha_c2, f"kind2_{name}": q.kind2, f"result2_{name}": code(q.result),
+                        f"clearance_{name}": clearance(p, scene)})
     return out
 
 
@@ -380,6 +412,10 @@ def _cmd_snap_angles(args):
         rec[f"fold_height_after_{name}"] = val(out[f"fold_height_after_{name}"])
         rec[f"start_{name}"] = _result_name(out[f"start_{name}"])
         rec[f"result_{name}"] = _result_name(out[f"result_{name}"])
+        rec[f"alpha_c2_{name}_deg"] = val(out[f"alpha_c2_{name}"], deg=True)
+        rec[f"kind2_{name}"] = jr.KIND_NAMES[int(out[f"kind2_{name}"])]
+        rec[f"result2_{name}"] = _result_name(out[f"result2_{name}"])
+        rec[f"clearance_{name}"] = val(out[f"clearance_{name}"])
         if args.extrapolate:
             rec[f"alpha_c_{name}_deg_n"] = val(out[f"alpha_c_{name}_n"], deg=True)
             rec[f"alpha_c_{name}_deg_n_fine"] = val(out[f"alpha_c_{name}_n_fine"], deg=True)
@@ -387,7 +423,7 @@ def _cmd_snap_angles(args):
             rec[f"meshes_consistent_{name}"] = bool(out[f"consistent_{name}"])
     # any code but success (an unknown outcome, a substituted start, a state through itself,
     # meshes that disagree, no derivative) is printed and ends with EXIT_NOT_CONVERGED
-    codes = [rec[f"{k}_{name}"] for k in ("result", "start") for name in ("up", "down")]
+    codes = [rec[f"{k}_{name}"] for k in ("result", "start", "result2") for name in ("up", "down")]
     failed = [c for c in codes if c != "successful"]
     if args.json:
         print(json.dumps(rec))
@@ -403,6 +439,12 @@ def _cmd_snap_angles(args):
                         f"{rec[f'fold_height_before_{name}']:+.4f} -> "
                         + (f"{fa:+.4f}" if fa is not None else f"unknown ({res})"))
             print(f"snap {name:<4}: " + text)
+            if rec[f"alpha_c2_{name}_deg"] is not None:
+                a2 = rec[f"alpha_c2_{name}_deg"]
+                print(f"           next critical point {a2:+.6f} deg ({rec[f'kind2_{name}']}), "
+                      f"{abs(a2 - a):.3f} deg further")
+            if rec[f"clearance_{name}"] is not None:
+                print(f"           clearance {rec[f'clearance_{name}']:.4f} L")
     if failed:
         print(f"jaxrod snap-angles: path result {', '.join(sorted(set(failed)))} (see jaxrod.RESULTS)",
               file=sys.stderr)

@@ -232,7 +232,6 @@ def section_master_curves(cache, n, out, progress, quick=False):
 # one compile of `jr.simulate` per mesh serves all of them.
 
 _PAPER_FIT = (42.59, 30.38, 5.00)  # v_s/v* = v_m - a G/L - b Psi0 (Psi0 in rad), the paper's Eq. 3
-_NUDGE = 0.05  # brink: nudge along the unstable mode (rad), as `jaxrod speed-plane`
 _T1 = 4.0  # time limit in T; every brink snap here ends (first overshoot) before 1.6 T
 _N_FRAMES = 64
 # PET (MODEL.md): L = 20 cm, t = 80-250 um, E ~ 4-5 GPa, rho ~ 1380 kg/m^3. v* = (t/L) sqrt(E/(12 rho))
@@ -323,7 +322,7 @@ def _vs_record(psi0_deg, gap, cfg):
     snap = jr.snap_angles(scene)
     if not bool(snap.up.snaps):
         return {"snaps": False, "kind": jr.KIND_NAMES[int(snap.up.kind)]}
-    start, tr = jr.snap_dynamics(scene, "up", kind="brink", nudge=_NUDGE, snap=snap, **_run_kwargs(cfg))
+    start, tr = jr.snap_dynamics(scene, "up", kind="brink", snap=snap, **_run_kwargs(cfg))
     rec = _dyn_record(start, tr)
     rec.update(snaps=bool(tr.snapped), kind=jr.KIND_NAMES[int(snap.up.kind)])
     return rec
@@ -353,8 +352,7 @@ def _framed_snap(cache, out, p, g, cfg):
         import jaxrod as jr
 
         scene = _scene(p, g, cfg["n"], 0.02)
-        start, tr = jr.snap_dynamics(scene, "up", kind="brink", nudge=_NUDGE,
-                                     **_run_kwargs(cfg, _snap_window(rec)))
+        start, tr = jr.snap_dynamics(scene, "up", kind="brink", **_run_kwargs(cfg, _snap_window(rec)))
         r = _dyn_record(start, tr)
         r["kind"] = rec.get("kind")
         return r, _traj_arrays(tr)
@@ -414,7 +412,9 @@ def section_snap_dynamics(cache, out, progress, cfg):
              f"{fast['s_fastest_25']:.2f} -> {fast['s_fastest_50']:.2f} -> {fast['s_fastest_peak']:.2f}",
              "at 25 % and 50 % of v_s and at the peak; the model is mirror-symmetric, so which half goes "
              "first is set by the nudge (the mirror image is an equally valid snap)")]
-    text = (f"`jr.snap_dynamics(scene, 'up', kind='brink', nudge={_NUDGE})`: the critical state of the "
+    from ..dynamics import NUDGE
+
+    text = (f"`jr.snap_dynamics(scene, 'up', kind='brink', nudge={NUDGE})`: the critical state of the "
             "quasi-static path, clamps 1e-3 rad past alpha_c_up, nudged along the unstable mode "
             f"(kind: {rec.get('kind')}); {_dyn_words(cfg)}, N = {cfg['n']}, no dissipation. "
             f"v_s = {rec['v_s']:.3f} v* at t = {rec['t_peak']:.3f} T. The paper's Fig. 3 is a DER simulation "

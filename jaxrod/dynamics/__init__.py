@@ -11,6 +11,8 @@ Layer: above branches (a brink starts from a snap angle); below design.
 from ._equations import Dissipation as Dissipation
 from ._equations import Protocol as Protocol
 from ._scenes import brink as brink
+from ._scenes import NUDGE as NUDGE
+from ._scenes import nudge_start as nudge_start
 from ._scenes import ramp as ramp
 from ._scenes import snap_dynamics as snap_dynamics
 from ._scenes import Start as Start

@@ -2,10 +2,12 @@ r"""Snap scenes: where a dynamic run starts and how the clamps move.
 
 * **brink**: the critical state of the quasi-static path (`jr.snap_angles`:
   `theta_before`, `alpha_c`), the clamps held at $\alpha_c+\delta\alpha$ (`past`, in the
-  snapping direction) and the angles nudged by `nudge` (rad, max-norm) along the unstable
-  mode (the lowest eigenvector of the constrained Hessian, sign chosen so the fold moves
-  toward the other state), projected back onto the end condition
-  $\sum_ih_i\mathbf t_i=(G,0)$ by Gauss-Newton.
+  snapping direction) and the angles nudged by `nudge` (rad, RMS over the strip; default
+  [`NUDGE`][] = 0.03 for every entry point) along the unstable mode (the lowest
+  eigenvector of the constrained Hessian, sign chosen so the fold moves toward the other
+  state), projected back onto the end condition $\sum_ih_i\mathbf t_i=(G,0)$ by
+  Gauss-Newton (`nudge_start`). The RMS norm $\sqrt{\sum_ih_i\delta\theta_i^2/L}$ is smooth
+  in the design, where a max-norm has kinks, so the snap speed stays differentiable.
 * **ramp**: a stable state at $\alpha_0$ (`jr.initial_state` then the clamps ramped at
   `rate` rad/T from rest through $\alpha_c$; symmetric by default.
 * **asymmetric**: the left clamp held at its angle, only the right one ramped (the paper's
@@ -34,9 +36,29 @@ from ..statics import solve_equilibrium
 from ..statics import initial_state
 from ..linalg.batched import solve2
 from .._misc import check_param
-from ..branches import snap_angles
+from ..branches import snap_angles, snap_routes
 from ..results import RESULTS
 from ..statics import stability
+
+
+NUDGE = 0.03
+"""The brink's default nudge (rad, RMS of the angle change along the unstable mode):
+`brink`, `snap_dynamics`, `snap_speed`, the CLI and `jaxrod reproduce` all start from it.
+The snap speed moves by about 1e-3 relative between small nudges (measured in
+`jaxrod.snap_speed`'s docstring); a larger nudge shortens the slow exponential departure."""
+
+
+def nudge_start(theta_c, mode, scene, direction, nudge):
+    r"""The brink's start $\Pi(\theta_c+\epsilon\hat v)$: `theta_c` plus `nudge` $\epsilon$ (rad,
+    RMS) times the unstable `mode` scaled to unit RMS norm $\sum_ih_i\hat v_i^2=L$, signed so
+    that the fold height moves in `direction` (+1 up, -1 down) to first order, projected
+    ($\Pi$) onto the end condition of `scene` (which holds the clamps of the run)."""
+    d = discretize(scene)
+    k = scene.mesh.n // 2
+    v = mode / jnp.sqrt(jnp.sum(d.h * mode**2) / jnp.sum(d.h))
+    dy = jnp.sum((d.h * jnp.cos(theta_c) * v)[:k])  # first-order change of the fold height
+    v = v * jnp.where(direction * jax.lax.stop_gradient(dy) >= 0, 1.0, -1.0)
+    return project(theta_c + nudge * v, scene)
 
 
 class Start(eqx.Module):
@@ -83,12 +105,17 @@ def _direction(direction):
     return 1.0 if direction == "up" else -1.0
 
 
-def brink(scene, direction="up", *, nudge=1e-3, past=1e-3, snap=None) -> Start:
+def brink(scene, direction="up", *, nudge=NUDGE, past=1e-3, snap=None, route="first") -> Start:
     """The brink scene (see the module docstring). `snap`: a precomputed
-    `jr.snap_angles(scene)` to reuse."""
+    `jr.snap_angles(scene)` to reuse. `route`: "first" (the critical point where the
+    quasi-static path snaps) or "second" (the next critical point of the same branch past
+    a branch point, `jr.snap_routes`: the route a fast ramp of a nearly perfect strip
+    takes); the nudge is along the mode that goes unstable there."""
     sgn = _direction(direction)
     check_param("nudge", nudge, lo=0.0)
     check_param("past", past, lo=0.0, lo_open=False)
+    if route not in ("first", "second"):
+        raise ValueError(f"route must be 'first' or 'second', got {route!r}")
     snap = snap_angles(scene) if snap is None else snap
     path = snap.up if sgn > 0 else snap.down
     from .._misc import is_concrete
@@ -96,22 +123,30 @@ def brink(scene, direction="up", *, nudge=1e-3, past=1e-3, snap=None) -> Start:
     if is_concrete(path.snaps) and not bool(path.snaps):
         raise ValueError(f"direction: the quasi-static {direction} path of this scene does not snap "
                          "(jr.snap_angles found no loss of stability), so there is no brink")
-    a = path.alpha_c + sgn * past
-    sc = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene,
-                     (path.alpha_c, path.alpha_c))
-    eq = solve_equilibrium(sc, path.theta_before, path.force_before)
-    st = stability(eq, k=1)
-    v = st.modes[:, 0]
-    d = discretize(sc)
-    k = sc.mesh.n // 2
-    dy = jnp.sum((d.h * jnp.cos(eq.theta) * v)[:k])  # first-order change of the fold height
-    v = v * jnp.where(sgn * dy >= 0, 1.0, -1.0) / jnp.max(jnp.abs(v))
+    if route == "first":
+        alpha_c, theta_c, force_c, exists = path.alpha_c, path.theta_before, path.force_before, path.snaps
+    else:
+        r = snap_routes(scene, snap=snap)
+        r = r.up if sgn > 0 else r.down
+        if is_concrete(r.kind2) and int(r.kind2) == 0:
+            raise ValueError(f"route: the {direction} path of this scene has no second critical point "
+                             "(jr.snap_routes: it snaps at a fold, or its branch reaches the bound)")
+        alpha_c, theta_c, force_c, exists = r.alpha_c2, r.theta2, r.force2, r.kind2 != 0
+    a = alpha_c + sgn * past
+    sc = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (alpha_c, alpha_c))
+    eq = solve_equilibrium(sc, theta_c, force_c)
+    if route == "first":
+        mode = stability(eq, k=1).modes[:, 0]
+        solved = eq.result == RESULTS.successful
+    else:
+        mode = r.mode2
+        # past the first critical point the branch is unstable: the second one is a saddle
+        solved = (eq.result == RESULTS.successful) | (eq.result == RESULTS.converged_to_saddle)
     sc_run = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (a, a))
-    theta0 = project(eq.theta + nudge * v, sc_run)
+    theta0 = nudge_start(eq.theta, mode, sc_run, sgn, nudge)
     from ..statics import bending_energy
 
-    return Start(sc_run, theta0, Protocol(a, a), sgn, path.alpha_c, bending_energy(eq),
-                 path.snaps & (eq.result == RESULTS.successful))
+    return Start(sc_run, theta0, Protocol(a, a), sgn, alpha_c, bending_energy(eq), exists & solved)
 
 
 def ramp(scene, direction="up", *, rate=0.5, alpha_start=None, right_only=False, snap=None,
@@ -147,16 +182,18 @@ def ramp(scene, direction="up", *, rate=0.5, alpha_start=None, right_only=False,
                  bending_energy(eq), eq.result == RESULTS.successful)
 
 
-def snap_dynamics(scene, direction="up", *, kind="brink", nudge=1e-2, past=1e-3, rate=0.5,
-                  alpha_start=None, snap=None, seed=0.0, **simulate_kwargs):
+def snap_dynamics(scene, direction="up", *, kind="brink", nudge=NUDGE, past=1e-3, rate=0.5,
+                  alpha_start=None, snap=None, seed=0.0, route="first", **simulate_kwargs):
     """One dynamic snap: build the `kind` scene ("brink", "ramp" or "asymmetric", see the
-    module docstring; `seed` for the ramps) and integrate it with [`jaxrod.simulate`][].
-    Returns (start, trajectory)."""
+    module docstring; `seed` for the ramps, `route` for the brink) and integrate it with
+    [`jaxrod.simulate`][]. Returns (start, trajectory)."""
     from ._simulate import simulate
 
     # every setting before any statics are solved (the start state costs a snap_angles)
     if kind not in ("brink", "ramp", "asymmetric"):
         raise ValueError(f"kind must be 'brink', 'ramp' or 'asymmetric', got {kind!r}")
+    if route not in ("first", "second"):
+        raise ValueError(f"route must be 'first' or 'second', got {route!r}")
     _direction(direction)
     check_param("nudge", nudge, lo=0.0)
     check_param("past", past, lo=0.0, lo_open=False)
@@ -167,7 +204,7 @@ def snap_dynamics(scene, direction="up", *, kind="brink", nudge=1e-2, past=1e-3,
     names = inspect.signature(check_run_settings).parameters
     check_run_settings(**{k: v for k, v in simulate_kwargs.items() if k in names})
     if kind == "brink":
-        start = brink(scene, direction, nudge=nudge, past=past, snap=snap)
+        start = brink(scene, direction, nudge=nudge, past=past, snap=snap, route=route)
     elif kind == "ramp":
         start = ramp(scene, direction, rate=rate, alpha_start=alpha_start, snap=snap, seed=seed)
     elif kind == "asymmetric":

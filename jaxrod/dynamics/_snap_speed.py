@@ -11,11 +11,11 @@ $L=B=\lambda=1$, MODEL.md):
    on the extended system by [`jaxrod.critical_point`][], whose result is differentiable
    by the implicit function theorem in every float leaf of the scene);
 2. clamps held at $\alpha_c+\sigma\,\delta\alpha$ (`past`; $\sigma=\pm1$ the direction),
-   angles $\theta(0)=\Pi(\theta_c+\epsilon\,\hat v)$: `nudge` $\epsilon$ times the mode with
-   unit RMS norm $\sum_ih_i\hat v_i^2=L$ (`jaxrod.brink` uses the max-norm; the RMS norm is
-   smooth in the design where the max-norm has kinks), its sign chosen so that the fold
-   moves toward the other state, projected ($\Pi$) onto the end condition by a fixed
-   number of Gauss-Newton steps; at rest;
+   angles $\theta(0)=\Pi(\theta_c+\epsilon\,\hat v)$: `nudge` $\epsilon$ (default
+   `jaxrod.dynamics.NUDGE`, as `jaxrod.brink`) times the mode with unit RMS norm
+   $\sum_ih_i\hat v_i^2=L$ (smooth in the design, where a max-norm has kinks), its sign
+   chosen so that the fold moves toward the other state, projected ($\Pi$) onto the end
+   condition by a fixed number of Gauss-Newton steps (`jaxrod.dynamics.nudge_start`); at rest;
 3. [`jaxrod.simulate`][] with a fixed step: by default `solver="rattle"` (symplectic,
    links and ends exact) at the largest step $\le\min(0.45\,(h_{\min}/L)^2,\
    2\cdot10^{-4})\,T$ ($T=L^2\sqrt{\lambda/B}$; RATTLE is stable below 0.5 $h^2$) that
@@ -52,9 +52,9 @@ jumps), near the termination gap $G^\ast(\Psi_0)$ (the snap vanishes), where two
 maxima of a snap trade places, and for a branch point the mode's sign is a choice of
 mirror image (both give the same $v_s$ by symmetry).
 
-**Accuracy** (measured; defaults `nudge` 0.03, `past` 1e-3). Psi0 = 90 deg, G/L = 0.46,
+**Accuracy** (measured; defaults `nudge` 0.03 RMS, `past` 1e-3). Psi0 = 90 deg, G/L = 0.46,
 s0 = 0.02 (the study (c) design; a branch point, alpha_c = 80.80 deg at N = 48). Reference:
-`jaxrod.snap_dynamics` (brink, its nudge 1e-2 max-norm, adaptive Dopri8, rtol = atol =
+`jaxrod.snap_dynamics` (brink, nudge 1e-2 rad max-norm, adaptive Dopri8, rtol = atol =
 1e-9) at the same N. RATTLE (the default; forward time after compiling, 2026-12-02) and
 Tsit5 at 0.15 h^2 (2026-11):
 
@@ -72,8 +72,8 @@ Tsit5 at 0.15 h^2 (2026-11):
 convergence is pre-asymptotic). So the design mesh N = 48 is within 0.4 % (1 % asked).
 Below N ~ 48 RATTLE's step is capped at 2e-4 T (the crease's fast rotation, not stability,
 sets the error there), hence ~3500 steps. The same-N difference from the reference is
-mostly the start (nudge 0.03 RMS here vs 0.01 max-norm there): with the same start
-(`jaxrod.brink`, nudge 0.05) Tsit5's fixed step alone differs from Dopri8 1e-9 by 9e-6 at
+mostly the start (nudge 0.03 RMS here vs 0.01 max-norm there): with one start
+(`jaxrod.brink`, nudge 0.05 max-norm) Tsit5's fixed step alone differs from Dopri8 1e-9 by 9e-6 at
 N = 48 (dt = 1e-4: 20.08297 vs 20.08314), and the brink's v_s moves by 1.1e-3 between
 nudges 0.01 and 0.05. RATTLE's energy error is bounded (symplectic) but larger than
 Tsit5's: 6e-4 of the start's potential here, up to 2.5e-3 at the fast corner Psi0 = 10 deg,
@@ -98,9 +98,8 @@ import jax
 import jax.numpy as jnp
 
 from ._equations import Protocol
-from ._scenes import _direction, project
+from ._scenes import NUDGE, _direction, nudge_start
 from ._simulate import FIXED_STEP, SOLVERS, _rattle_dt_natural, simulate
-from ..energy.geometry import discretize
 from .._misc import check_param
 from ..branches import snap_angles
 from ..results import RESULTS
@@ -169,17 +168,9 @@ def _run(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
     path = snap.up if sgn > 0 else snap.down
     valid = path.snaps & (path.refine_result == RESULTS.successful)
     alpha_c = jnp.where(valid, path.alpha_c, 0.0)  # keep the run finite where there is no snap
-    d = discretize(scene)
-    n = scene.mesh.n
-    k = n // 2
-    theta_c = path.theta_before
-    v = path.mode
-    v = v / jnp.sqrt(jnp.sum(d.h * v**2) / jnp.sum(d.h))  # unit RMS norm
-    dy = jnp.sum((d.h * jnp.cos(theta_c) * v)[:k])  # first-order change of the fold height
-    v = v * jnp.where(sgn * jax.lax.stop_gradient(dy) >= 0, 1.0, -1.0)
     a = alpha_c + sgn * past
     sc_run = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (a, a))
-    theta0 = project(theta_c + nudge * v, sc_run)
+    theta0 = nudge_start(path.theta_before, path.mode, sc_run, sgn, nudge)
     max_steps = int(math.ceil(t1 / dt)) + 10
     st = scene.strip
     T = st.length**2 * jnp.sqrt(st.line_density / st.bending_stiffness)  # dt, t1 are in units of T
@@ -253,7 +244,7 @@ def _options(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
     return (direction, float(nudge), float(past), float(dt), float(t1), n_fine, solver, float(max_drift))
 
 
-def snap_speed(scene, direction="up", *, nudge=0.03, past=1e-3, dt=None, t1=2.0, n_fine=None, solver="rattle",
+def snap_speed(scene, direction="up", *, nudge=NUDGE, past=1e-3, dt=None, t1=2.0, n_fine=None, solver="rattle",
                max_drift=None):
     r"""The snapping speed $v_s$ of the `direction` ("up" or "down") quasi-static snap of
     `scene` (symmetric actuation; the scene's clamp angles are ignored), differentiable in
@@ -291,7 +282,7 @@ def _speed_jit(scene, opts):
     return _speed(scene, opts=opts)
 
 
-def snap_speed_run(scene, direction="up", *, nudge=0.03, past=1e-3, dt=None, t1=2.0, n_fine=None,
+def snap_speed_run(scene, direction="up", *, nudge=NUDGE, past=1e-3, dt=None, t1=2.0, n_fine=None,
                    solver="rattle", max_drift=None) -> SpeedRun:
     """`snap_speed` with its diagnostics (a [`SpeedRun`][]; not differentiable in forward mode)."""
     opts = _options(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift)
