@@ -107,3 +107,18 @@ def test_extrapolated_gradient_is_the_same_combination():
     g100, g200, gx = jax.grad(f)(p, 100), jax.grad(f)(p, 200), jax.grad(fx)(p)
     assert abs(float(gx) - (4 * float(g200) - float(g100)) / 3) < 1e-9 * max(1.0, abs(float(gx)))
     assert abs(float(gx)) > 1e-3
+
+
+@pytest.mark.slow  # four more compiles (N and 2N, with and without the post-snap stage)
+@pytest.mark.parametrize("psi0, gap", [(60.0, 0.5), (30.0, 0.6), (180.0, 0.3)])
+def test_post_snap_stage_changes_no_angle(psi0, gap):
+    """The default skips the landed branch after each snap: the same angles, landed states
+    and codes as with it (30 deg, 0.6: the up path starts from the down path's end)."""
+    sc = jr.make_scene(psi0, gap, 0.0, n=24)
+    a, b = jr.snap_angles_extrapolated(sc), jr.snap_angles_extrapolated(sc, continue_after_snap=True)
+    for p in ("up", "down"):
+        x, y = getattr(a, p), getattr(b, p)
+        for f in ("alpha_c", "fold_height_before", "fold_height_after", "error"):
+            np.testing.assert_array_equal(np.asarray(getattr(x, f)), np.asarray(getattr(y, f)))
+        assert x.result == y.result and x.start_result == y.start_result
+    assert int(a.fine.up.branch.count[1]) == 0 or int(a.fine.up.stage) == 1

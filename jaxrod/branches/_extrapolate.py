@@ -114,12 +114,17 @@ def _combine(c: SnapPath, f: SnapPath) -> ExtrapolatedPath:
     )
 
 
-def snap_angles_extrapolated(scene: Scene, **kwargs) -> ExtrapolatedSnapAngles:
+def snap_angles_extrapolated(scene: Scene, *, continue_after_snap: bool = False, **kwargs) -> ExtrapolatedSnapAngles:
     r"""[`jaxrod.snap_angles`][] on the scene's mesh ($N$) and on one twice as fine, and
     their Richardson extrapolation (module docstring). `kwargs` go to `snap_angles`.
-    Costs one `snap_angles` at $N$ plus one at $2N$ (two compilations on first use)."""
-    coarse = snap_angles(scene, **kwargs)
+    Costs one `snap_angles` at $N$ plus one at $2N$ (two compilations on first use).
+
+    `continue_after_snap` defaults to False here: the landed branch after each snap (the
+    post-snap stage of the hysteresis figures) does not change the critical angles or the
+    landed states, and skipping it saves about a quarter of the run (N = 60 + 120: 116 ms ->
+    85 ms on 2 cores); pass True to keep it in `coarse` and `fine`."""
+    coarse = snap_angles(scene, continue_after_snap=continue_after_snap, **kwargs)
     fine_scene = refined_scene(scene)
-    fine = snap_angles(fine_scene, **kwargs)
+    fine = snap_angles(fine_scene, continue_after_snap=continue_after_snap, **kwargs)
     return ExtrapolatedSnapAngles(up=_combine(coarse.up, fine.up), down=_combine(coarse.down, fine.down),
                                   coarse=coarse, fine=fine, n_coarse=scene.mesh.n, n_fine=fine_scene.mesh.n)
