@@ -105,6 +105,7 @@ def test_gradients_match_central_differences(program):
         assert g.rel_error < 1e-5, g
 
 
+@pytest.mark.slow  # 27 s: the held-angle optimizer's own compile; its derivative is the gradient check's (slow too)
 def test_optimized_held_angle():
     """Newton on h_L + h_R = 0 (the implicit derivative shared with the gradient check) from
     beta = -110 deg converges to the balanced landing, a local maximum of m1 = min(h_L, -h_R)

@@ -628,6 +628,7 @@ grad_gaps = st.floats(0.2, 0.7, allow_nan=False, allow_infinity=False)
 grad_s0s = st.floats(0.015, 0.06, allow_nan=False, allow_infinity=False)
 
 
+@pytest.mark.slow  # 20 s; CI checks the refinement's gradients, snap_angles' own (test_critical.py)
 @settings(max_examples=examples("gradient"))
 @given(grad_psi0s, grad_gaps, grad_s0s)
 @example(60.0, 0.5, 0.02)

@@ -112,20 +112,22 @@ def test_cli_snap_angles_json(snap, capsys):
     assert rec["start_up"] == "start_substituted" and rec["start_down"] == "successful"
 
 
-def test_continuation_that_gives_up_is_not_a_silent_no_snap():
+@pytest.mark.parametrize("settings, stop", [
+    (jr.Continuation(max_points=3), 0),  # the same compilation as the CLI test's
+    pytest.param(jr.Continuation(ds=0.05, ds_min=0.1), 3, marks=pytest.mark.slow),  # a compile of its own
+])
+def test_continuation_that_gives_up_is_not_a_silent_no_snap(settings, stop):
     """A path whose continuation stops before a loss of stability or the bound |alpha| = pi
     (buffer full: stop 0; step below ds_min: stop 3) has an unknown outcome: it must say so
     through `result`, not read as "does not snap" with a successful code."""
     sc = jr.make_scene(60.0, 0.5, 0.0, n=40)
     # (the successful paths, stop 2 and stop 1, are checked in the two tests above)
-    for settings, stop in ((jr.Continuation(max_points=3), 0),  # the same compilation as the CLI test's
-                           (jr.Continuation(ds=0.05, ds_min=0.1), 3)):
-        r = jr.snap_angles(sc, settings=settings, polish=False)
-        for p in (r.up, r.down):
-            assert int(p.stop) == stop
-            assert p.result == jr.RESULTS.continuation_incomplete
-            assert p.start_result == jr.RESULTS.successful  # the start state itself is fine
-            assert not bool(p.snaps) and np.isnan(float(p.alpha_c)) and int(p.kind) == 0
+    r = jr.snap_angles(sc, settings=settings, polish=False)
+    for p in (r.up, r.down):
+        assert int(p.stop) == stop
+        assert p.result == jr.RESULTS.continuation_incomplete
+        assert p.start_result == jr.RESULTS.successful  # the start state itself is fine
+        assert not bool(p.snaps) and np.isnan(float(p.alpha_c)) and int(p.kind) == 0
 
 
 def test_failed_landing_is_reported_not_dropped(snap, monkeypatch):
