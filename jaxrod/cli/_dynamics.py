@@ -162,21 +162,20 @@ def _record(start, tr, phys=None):
 def _clearance(scene, tr):
     """The smallest clearance over the run's frames (segments at least N/10 apart, as
     `jaxrod snap-angles` reports it), in L; NaN without a finite frame."""
+    import equinox as eqx
     import jax
     import jax.numpy as jnp
     import numpy as np
 
     import jaxrod as jr
 
-    from ._main import CLEARANCE_SEPARATION
-
-    import equinox as eqx
+    from ._main import clearance_separation
 
     th = np.asarray(tr.theta)
     th = th[np.all(np.isfinite(th), axis=1)]  # frames after the run's stop are inf
     if not th.size:
         return float("nan")
-    m = max(2, -(-scene.mesh.n // CLEARANCE_SEPARATION))
+    m = clearance_separation(scene.mesh.n)
     # one compiled program for all frames (a CLI run calls this once)
     c = eqx.filter_jit(jax.vmap(functools.partial(jr.clearance, min_separation=m), in_axes=(0, None)))(
         jnp.asarray(th), scene)

@@ -323,8 +323,11 @@ def _cmd_equilibrium(args):
     return EXIT_OK if rec["converged"] else EXIT_NOT_CONVERGED
 
 
-CLEARANCE_SEPARATION = 10
-"""`jaxrod snap-angles` reports the clearance between segments at least N / 10 apart."""
+def clearance_separation(n):
+    """The `min_separation` of the clearance the CLI reports: segments at least N / 10
+    apart along the strip (nearer pairs are bounded by their arclength, see
+    `jaxrod.clearance`), at least 2."""
+    return max(2, -(-n // 10))
 
 
 def _snap_arrays(scene, extrapolate):
@@ -338,10 +341,8 @@ def _snap_arrays(scene, extrapolate):
         return r._value
 
     def clearance(p, sc):
-        # the smallest distance between segments at least N/10 apart along the strip (nearer
-        # pairs are bounded by their arclength, see jaxrod.clearance) over the reported states
-        # (critical and landed), in L
-        m = max(2, -(-sc.mesh.n // CLEARANCE_SEPARATION))
+        # the smallest clearance over the reported states (critical and landed), in L
+        m = clearance_separation(sc.mesh.n)
         c = [jr.clearance(p.theta_before, sc, force=p.force_before, min_separation=m),
              jr.clearance(p.theta_after, sc, force=p.force_after, min_separation=m)]
         c = jnp.stack([jnp.where(jnp.isfinite(x), x, jnp.inf) for x in c])
