@@ -362,12 +362,8 @@ def extrapolated(n):
         rec = dict(_path_ref(q, q.kind), error_estimate_deg=math.degrees(float(q.error)))
         c, f = getattr(r.coarse, p).branch, getattr(r.fine, p).branch
         assert float(c.lam[0, 0]) == 0.0 and float(f.lam[0, 0]) == 0.0
-
-        def rich(a, b):
-            return float(b + (b - a) / 3.0)
-
-        rec["start_fold_height"] = rich(c.fold_height[0, 0], f.fold_height[0, 0])
-        rec["start_mu_x"] = rich(c.force[0, 0, 0], f.force[0, 0, 0])
+        rec["start_fold_height"] = float(jr.richardson(c.fold_height[0, 0], f.fold_height[0, 0]))
+        rec["start_mu_x"] = float(jr.richardson(c.force[0, 0, 0], f.force[0, 0, 0]))
         out[p] = rec
     return out
 

@@ -27,6 +27,7 @@ from ._critical_curve import CriticalCurve as CriticalCurve
 from ._extrapolate import ExtrapolatedPath as ExtrapolatedPath
 from ._extrapolate import ExtrapolatedSnapAngles as ExtrapolatedSnapAngles
 from ._extrapolate import refined_scene as refined_scene
+from ._extrapolate import richardson as richardson
 from ._extrapolate import snap_angles_extrapolated as snap_angles_extrapolated
 from ._hysteresis import BRANCH_NAMES as BRANCH_NAMES
 from ._hysteresis import Hysteresis as Hysteresis

@@ -83,13 +83,19 @@ def refined_scene(scene: Scene, factor: int = 2) -> Scene:
     return Scene(scene.strip, scene.clamps, Mesh(factor * m.n, m.refine, m.width), scene.stretching, scene.gravity)
 
 
+def richardson(coarse, fine, factor: int = 2):
+    r"""Richardson extrapolation of a quantity computed on a mesh and on one `factor` times
+    finer, for the discretization's order 2: $q_f+(q_f-q_c)/(\text{factor}^2-1)$."""
+    return fine + (fine - coarse) / (factor**ORDER - 1.0)
+
+
 def _combine(c: SnapPath, f: SnapPath) -> ExtrapolatedPath:
     r = 2.0**ORDER - 1.0
     consistent = (c.snaps == f.snaps) & (c.kind == f.kind)
     both = consistent & f.snaps
 
     def ex(a, b):
-        return jnp.where(both, b + (b - a) / r, b)
+        return jnp.where(both, richardson(a, b), b)
 
     err = jnp.where(both, jnp.abs(f.alpha_c - c.alpha_c) / r,
                     jnp.where(c.snaps & f.snaps, jnp.abs(f.alpha_c - c.alpha_c), jnp.nan))

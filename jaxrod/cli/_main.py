@@ -357,8 +357,7 @@ def _snap_arrays(scene, extrapolate):
             e, p = getattr(x, name), getattr(x.fine, name)
             c2, f2 = getattr(rc, name), getattr(rf, name)
             both = (c2.kind2 == f2.kind2) & (f2.kind2 != 0)
-            r = (x.n_fine // x.n_coarse) ** 2 - 1  # Richardson on the second-order mesh
-            a2 = jnp.where(both, f2.alpha_c2 + (f2.alpha_c2 - c2.alpha_c2) / r, f2.alpha_c2)
+            a2 = jnp.where(both, jr.richardson(c2.alpha_c2, f2.alpha_c2, x.n_fine // x.n_coarse), f2.alpha_c2)
             out.update({f"alpha_c_{name}": e.alpha_c, f"kind_{name}": p.kind,
                         f"fold_height_before_{name}": e.fold_height_before,
                         f"fold_height_after_{name}": e.fold_height_after,
