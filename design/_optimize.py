@@ -20,6 +20,7 @@ steps are rejected, and a start that is infeasible from the beginning is reporte
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import sys
@@ -99,9 +100,33 @@ def _linearize_batch(problem, z, batch_size=None):
     return jax.lax.map(problem.linearize, z, batch_size=batch_size)
 
 
+@functools.lru_cache(maxsize=8)
+def _sharded(static, per_device):
+    """The starts split across every device (`jaxrod.ShardedMap`): one per problem structure."""
+    return jr.ShardedMap(lambda z, dyn: eqx.combine(dyn, static).linearize(z), per_device=per_device)
+
+
+def _linearize_sharded(problem, z):
+    """`_linearize_batch` with the starts split across every device JAX sees (and every
+    process after `jax.distributed.initialize()`), `ceil(B / devices)` on each."""
+    dyn, static = eqx.partition(problem, eqx.is_array)
+    per_device = -(-z.shape[0] // jax.device_count())
+    out, _ = _sharded(static, per_device)(np.asarray(z), dyn)
+    return out
+
+
+def _linearize(problem, z, batch_size):
+    if batch_size == "devices":
+        return _linearize_sharded(problem, z)
+    return _linearize_batch(problem, z, batch_size)
+
+
 def auto_batch_size():
-    """`batch_size="auto"`: 1 (one start after the other) on the CPU backend, where a large
-    `vmap` is slower and can deadlock XLA:CPU; None (one `vmap`) elsewhere."""
+    """`batch_size="auto"`: "devices" (the starts split across devices) where JAX sees more
+    than one; else 1 (one start after the other) on the CPU backend, where a large `vmap` is
+    slower and can deadlock XLA:CPU, and None (one `vmap`) elsewhere."""
+    if jax.device_count() > 1:
+        return "devices"
     return 1 if jax.default_backend() == "cpu" else None
 
 
@@ -131,7 +156,7 @@ class _Loop:
         self.problem, self.opt = problem, optimizer
         self.frac, self.gtol, self.max_iter = stop_fraction, gtol, max_iter
         self.batch_size = batch_size
-        r, J, v, c = (np.asarray(a) for a in _linearize_batch(problem, z0, batch_size))
+        r, J, v, c = (np.asarray(a) for a in _linearize(problem, z0, batch_size))
         self.z, self.r, self.J, self.values, self.codes = np.asarray(z0), r, J, v, c
         self.loss = _loss(r)
         B = z0.shape[0]
@@ -160,7 +185,7 @@ class _Loop:
             dz = np.asarray(dz)
         running = self.status == 0
         z_new = self.z + np.where(running[:, None], dz, 0.0)
-        r, J, v, c = (np.asarray(a) for a in _linearize_batch(self.problem, jnp.asarray(z_new), self.batch_size))
+        r, J, v, c = (np.asarray(a) for a in _linearize(self.problem, jnp.asarray(z_new), self.batch_size))
         loss = _loss(r)
         # LM accepts descent only; optax follows its own trajectory, refusing infeasible iterates
         accept = running & ((loss < self.loss) if self.opt is None else np.isfinite(loss))
@@ -327,8 +352,10 @@ def optimize(terms, param: Parametrization | None = None, z0=None, *, n: int = 4
     `optimizer`: "lm" (Levenberg-Marquardt, default) or an `optax.GradientTransformation`.
     `batch_size`: how the starts are batched inside the one compiled call per iteration.
     None: one `vmap` over all starts; an int k: `lax.map` over chunks of k starts, each
-    chunk `vmap`-ed (k = 1: one start after the other); "auto" (default): 1 on the CPU
-    backend, None elsewhere. Measured on 2 CPU cores at n = 100 (fold-height residual +
+    chunk `vmap`-ed (k = 1: one start after the other); "devices": the starts split across
+    every device JAX sees and every process (`jaxrod.ShardedMap`), ceil(B / devices) on each;
+    "auto" (default): "devices" where JAX sees more than one device, else 1 on the CPU
+    backend and None elsewhere. Measured on 2 CPU cores at n = 100 (fold-height residual +
     Jacobian, `benchmarks/results/design.md`): 64 starts took 5.61 s as one `vmap` (11.4
     designs/s), 2.58 s in chunks of 8 and 1.83 s one by one (35.0 designs/s); 1024 starts
     one by one 26.0 s (39.3 designs/s). Batched, every loop runs as long as its slowest
@@ -362,9 +389,9 @@ def optimize(terms, param: Parametrization | None = None, z0=None, *, n: int = 4
     t0 = time.perf_counter()
     if isinstance(batch_size, str) and batch_size == "auto":
         batch_size = auto_batch_size()
-    if batch_size is not None and (isinstance(batch_size, bool) or not isinstance(batch_size, int)
-                                   or batch_size < 1):
-        raise ValueError(f"batch_size: must be None, 'auto' or a positive integer, got {batch_size!r}")
+    if batch_size != "devices" and batch_size is not None and (
+            isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1):
+        raise ValueError(f"batch_size: must be None, 'auto', 'devices' or a positive integer, got {batch_size!r}")
     st = _Loop(problem, z0, opt, stop_fraction, gtol, max_iter, batch_size)
     values_of = jax.jit(jax.vmap(param.values))
     hist_loss, hist_vals = [st.loss.copy()], [np.asarray(values_of(st.z))]

@@ -33,7 +33,7 @@ import jaxrod as jr
 
 from ._critical import design_scene
 from ._objectives import AlphaDown, AlphaUp, SnapSpeed, dynamics_available
-from ._optimize import DesignResult, MultiStartResult, Problem, _linearize_batch, auto_batch_size, optimize
+from ._optimize import DesignResult, MultiStartResult, Problem, _linearize, auto_batch_size, optimize
 from ._params import NAMES, Parametrization
 
 
@@ -299,7 +299,7 @@ def golden_max(f, lo, hi, *, xtol=0.02, x0=None, f0=None):
 def _polish_psi0(d, terms, param, n, window, xtol):
     """Golden-section polish of study (b)'s fold angle at the design's gap (`golden_max` on
     [Psi0 - window, Psi0 + window] within the bounds), on the very program the optimizer
-    compiled (`_linearize_batch` of the same problem: no new compilation). Returns the
+    compiled (`_linearize` of the same problem: no new compilation). Returns the
     design with the better of the two points and a record of the polish."""
     problem = Problem(terms, param, n)
     batch = auto_batch_size()  # as `optimize` ran it: the same compiled program
@@ -312,7 +312,7 @@ def _polish_psi0(d, terms, param, n, window, xtol):
     def v_at(p):
         z = z_best.copy()
         z[i] = float(param.from_values(psi0_deg=p)[i])
-        r, _, vals, codes = _linearize_batch(problem, jnp.asarray(z)[None], batch)
+        r, _, vals, codes = _linearize(problem, jnp.asarray(z)[None], batch)
         cache[p] = (z, np.asarray(r)[0], np.asarray(vals)[0], np.asarray(codes)[0])
         return float(cache[p][2][0])
 

@@ -100,9 +100,16 @@ from .dynamics import Protocol as Protocol
 from .dynamics import ramp as ramp
 from .dynamics import simulate as simulate
 from .dynamics import snap_dynamics as snap_dynamics
+from .dynamics import fit_speed_plane as fit_speed_plane
 from .dynamics import snap_speed as snap_speed
+from .dynamics import speed_plane as speed_plane
 from .dynamics import Start as Start
 from .dynamics import Trajectory as Trajectory
+
+# sweeps: batches across devices, processes and hosts
+from .sweeps import grid as grid
+from .sweeps import ShardedMap as ShardedMap
+from .sweeps import sweep as sweep
 
 # plot: figures
 from .plot import plot_equilibria as plot_equilibria

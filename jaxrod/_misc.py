@@ -137,3 +137,13 @@ def run_if_each(pred, fn, default, operands=()):
         return out, jax.tree.map(lambda _: True, out)
 
     return f(jnp.asarray(pred, bool), default, arrays)
+
+
+def package_version() -> str:
+    """jaxrod's installed version ("0.0.0" when run from a source tree that is not installed)."""
+    import importlib.metadata
+
+    try:
+        return importlib.metadata.version("jaxrod")
+    except importlib.metadata.PackageNotFoundError:
+        return "0.0.0"

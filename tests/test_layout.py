@@ -1,6 +1,6 @@
 """The layers of the house, checked on the source: data flows one way.
 
-    model -> energy -> linalg -> statics -> branches -> dynamics -> design;  plot, cli on top
+    model -> energy -> linalg, sweeps -> statics -> branches -> dynamics -> design;  plot, cli on top
 
 Every import inside `jaxrod/` and `design/` (installed as `jaxrod.design`) is read from the
 syntax tree, at module level and inside functions alike, and each must (1) go to the same or
@@ -18,9 +18,9 @@ import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 # the shared base (results, _misc, _custom_types and the package root's own files) is layer 0
-RANK = {"model": 1, "energy": 2, "linalg": 3, "statics": 4, "branches": 5, "dynamics": 6, "design": 7,
+RANK = {"model": 1, "energy": 2, "linalg": 3, "sweeps": 3, "statics": 4, "branches": 5, "dynamics": 6, "design": 7,
         "plot": 8, "cli": 9}
-CORE = {"model", "energy", "linalg", "statics", "branches", "dynamics"}
+CORE = {"model", "energy", "linalg", "sweeps", "statics", "branches", "dynamics"}
 
 
 def _modules():

@@ -45,6 +45,8 @@ and mesh is read back, not recomputed. The assembled `xarray.Dataset` goes to
 
 from __future__ import annotations
 
+import datetime
+import functools
 import math
 import os
 
@@ -58,10 +60,11 @@ from jax import lax
 from ._continuation import Continuation, SymmetricAlpha
 from ..statics import float_scene, solve_equilibrium
 from ..statics import initial_state_signed, still_tracked
-from .._misc import check_param, run_if as _run_if, run_if_each
+from .._misc import check_param, package_version, run_if as _run_if, run_if_each
 from ..model import Clamps, Mesh, Scene, Strip
 from ._snap import _snap_angles_from
 from ..results import RESULTS
+from ..sweeps import agree, MODES, ShardedMap
 
 VARIABLES = ("alpha_c_up", "alpha_c_down", "kind_up", "kind_down", "fold_height_before_up",
              "fold_height_after_up", "fold_height_before_down", "fold_height_after_down",
@@ -145,11 +148,20 @@ def _grid(psis, gaps, s0, mesh, settings=Continuation()):
 
 
 def _resolve_batch(batch):
-    if batch not in ("auto", "scan", "vmap"):
-        raise ValueError(f"batch must be 'auto', 'scan' or 'vmap', got {batch!r}")
+    if batch not in ("auto", "scan", "vmap", "shard"):
+        raise ValueError(f"batch must be 'auto', 'scan', 'vmap' or 'shard', got {batch!r}")
     if batch == "auto":
+        if jax.device_count() > 1:
+            return "shard"
         return "scan" if jax.default_backend() == "cpu" else "vmap"
     return batch
+
+
+@functools.lru_cache(maxsize=8)
+def _sharded(mesh, settings, devices, per_device, mode):
+    """One `ShardedMap` of `_chunk` per mesh and split (so repeated calls reuse its compilation)."""
+    return ShardedMap(lambda psi0, shared: _chunk(psi0, shared[0], shared[1], mesh, settings=settings),
+                      devices=devices, per_device=per_device, mode=mode)
 
 
 def _attrs(gaps, s0, n, refine):
@@ -209,7 +221,7 @@ def _write(ds, path):
 
 
 def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progress=True, on_chunk=None,
-                  batch="auto"):
+                  batch="auto", devices=None, per_device=1, split="shard_map"):
     r"""Critical clamp angles over the grid `psi0_deg` x `gaps` (an `xarray.Dataset`).
 
     **Arguments:** `psi0_deg` fold angles in (0, 180] (degrees), `gaps` values of $G/L$ in
@@ -217,8 +229,13 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     resumable chunk files and `phase_diagram.nc`; `progress` a tqdm bar;
     `on_chunk(psi0_deg, computed: bool)` called after each chunk; `batch` `"scan"` (one
     compiled call per $\Psi_0$), `"vmap"` (every $\Psi_0$ still to compute in one vmapped
-    call) or `"auto"` (`"scan"` on the CPU, where it measured faster, else `"vmap"`). Both
-    give the same numbers.
+    call), `"shard"` (the fold angles still to compute split across `devices`, default every
+    device of every process, `per_device` of them per device in each call, by
+    [`jaxrod.sweeps.ShardedMap`][] with its `mode` = `split`) or `"auto"` (`"shard"` where JAX
+    sees more than one device, else `"scan"` on the CPU, where it measured faster, and
+    `"vmap"` elsewhere). All give the same numbers. With several processes
+    (`jax.distributed.initialize()`), process 0 writes the files and every process reads
+    `out`, which must then be one shared folder.
 
     **Returns:** dataset with dims `(psi0, gap)`: `alpha_c_up`, `alpha_c_down` (degrees,
     NaN where the path does not snap), `kind_up`/`kind_down` (0 none, 1 fold, 2 branch
@@ -226,7 +243,9 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     the start states), `result_up`/`result_down` (RESULTS codes of the whole paths, as
     `SnapPath.result`: not successful where NaN angles do not mean "does not snap"), `warm_starts` (how many of the two start states came from the
     previous gap, see the module docstring); attribute `computed_chunks` lists the $\Psi_0$ computed by this call
-    (the others were read back from `out`), `batch` the mode used. Needs float64.
+    (the others were read back from `out`), `batch` the mode used, and the provenance
+    `jaxrod_version`, `jax_version`, `backend`, `device_count`, `process_count`, `date_utc`
+    (also in `phase_diagram.nc`). Needs float64.
     """
     import xarray as xr
 
@@ -248,27 +267,42 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     g_arr = jnp.asarray(gaps, jnp.float64)
     s0_arr = jnp.asarray(float(s0), jnp.float64)
     batch = _resolve_batch(batch)
+    if split not in MODES:
+        raise ValueError(f"split must be one of {MODES}, got {split!r}")
     cached = {p: (_read_chunk(_chunk_path(out, p), attrs, p, gaps) if out is not None else None) for p in psis}
+    missing = np.asarray([cached[p] is None for p in psis])
+    if not np.array_equal(agree(missing), missing):
+        raise ValueError(f"out: process {jax.process_index()} finds other finished chunks in {out!r} than "
+                         "process 0; a run of several processes needs `out` on one shared file system")
     todo = [p for p in psis if cached[p] is None]
+    lead = jax.process_index() == 0
     batched = {}
     if batch == "vmap" and todo:
         # one call for every chunk still missing (the finished ones were read back above)
         vals = jax.device_get(_grid(jnp.asarray([math.radians(p) for p in todo], jnp.float64), g_arr, s0_arr, mesh))
         batched = {p: {k: v[i] for k, v in vals.items()} for i, p in enumerate(todo)}
+    sharded = None
+    if batch == "shard":
+        sharded = _sharded(mesh, Continuation(), None if devices is None else tuple(devices), per_device, split)
     chunks, computed = [], []
     it = psis
-    if progress:
+    if progress and lead:
         from tqdm import tqdm
 
         it = tqdm(psis, desc="phase diagram", unit="Psi0")
     for p in it:
         ds = cached[p]
         if ds is None:
-            vals = batched.get(p)
+            if sharded is not None and p not in batched:
+                # the next batch of fold angles still to compute, one (or `per_device`) per device
+                left = todo[todo.index(p):][:sharded.size]
+                vals, _ = sharded(np.radians(left), (np.asarray(gaps, np.float64), np.float64(s0)))
+                batched.update({q: {k: v[i] for k, v in vals.items()} for i, q in enumerate(left)})
+            vals = batched.pop(p, None)
             if vals is None:
                 vals = jax.device_get(_chunk(jnp.asarray(math.radians(p), jnp.float64), g_arr, s0_arr, mesh))
             ds = _chunk_dataset(p, gaps, vals, attrs)
-            if out is not None:
+            if out is not None and lead:
                 _write(ds, _chunk_path(out, p))
             computed.append(p)
         chunks.append(ds)
@@ -279,7 +313,11 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
                       kinds="0 none, 1 fold, 2 branch_point")
     full["alpha_c_up"].attrs["long_name"] = "snap-up critical clamp angle (deg)"
     full["alpha_c_down"].attrs["long_name"] = "snap-down critical clamp angle (deg)"
-    if out is not None:
+    full.attrs.update(jaxrod_version=package_version(), jax_version=jax.__version__, backend=jax.default_backend(),
+                      device_count=len(sharded.devices) if sharded is not None else 1,
+                      process_count=jax.process_count(),
+                      date_utc=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
+    if out is not None and lead:
         _write(full, os.path.join(out, "phase_diagram.nc"))
     full.attrs["computed_chunks"] = computed
     full.attrs["batch"] = batch

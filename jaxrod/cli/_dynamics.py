@@ -12,7 +12,10 @@ done (the whole file rewritten atomically: temp file, then `os.replace`; each ro
 the settings it was computed with), fits v_s/v* = v_m - a G/L - b Psi0 and draws
 `DIR/speed_plane.png`. A rerun reads back the points already there with the same
 settings and computes only the others; a torn or unreadable row is dropped and its
-point recomputed.
+point recomputed. `jaxrod speed-plane --batch shard` runs the grid through
+`jaxrod.speed_plane` instead: every point split across every device of every process
+(`--coordinator` joins several), RATTLE only, stored in `DIR/speed_plane.nc` and resumable
+from `DIR/chunks/`; the fit, figure and JSON are the same.
 """
 
 from __future__ import annotations
@@ -25,7 +28,8 @@ import os
 
 from ..dynamics import NUDGE
 from ..results import RESULTS
-from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _result_name, add_scene_args, make_scene_from_args)
+from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _result_name, add_distributed_args,
+                    add_scene_args, make_scene_from_args)
 
 PAPER_FIT = (42.59, 30.38, 5.00)
 
@@ -71,6 +75,11 @@ def register(sub):
     q.add_argument("--n", type=int, default=60, help="segments (default 60)")
     q.add_argument("--s0", type=float, default=0.02)
     _add_run_args(q)
+    q.add_argument("--batch", choices=("points", "shard"), default="points",
+                   help="points: one brink snap after the other, any --solver, DIR/speed_plane.csv (default); "
+                        "shard: every point through jaxrod.speed_plane, split across every device of every "
+                        "process (RATTLE), DIR/speed_plane.nc")
+    add_distributed_args(q)
     q.set_defaults(handler=_cmd_speed_plane)
 
 
@@ -343,6 +352,8 @@ def _cmd_speed_plane(args):
         raise InputError(str(e)) from None
     except OSError as e:
         raise InputError(f"out: cannot create {args.out!r}: {e.strerror or e}") from None
+    if args.batch == "shard":
+        return _speed_plane_sharded(args, psis, gaps)
     path = os.path.join(args.out, "speed_plane.csv")
     settings = _settings(args)
     mine = lambda r: all(r[k] == v for k, v in settings.items())  # noqa: E731
@@ -401,6 +412,51 @@ def _cmd_speed_plane(args):
     _write_atomic(os.path.join(args.out, "speed_plane_fit.json"), lambda fh: json.dump(out, fh, indent=1))
     print(json.dumps(out))
     # every file is written either way; the exit status says whether every point is trusted
+    return EXIT_NOT_CONVERGED if flagged else EXIT_OK
+
+
+def _speed_plane_sharded(args, psis, gaps):
+    """`jaxrod speed-plane --batch shard`: `jaxrod.speed_plane` across every device of every
+    process (resumable from DIR/chunks), then the same fit, figure and JSON as the point-by-point run."""
+    import sys
+
+    import jax
+
+    import jaxrod as jr
+
+    if args.solver != "rattle":
+        raise InputError(f"solver: --batch shard runs RATTLE (jaxrod.speed_plane); got --solver {args.solver}")
+    ds = jr.speed_plane(psis, gaps, direction=args.direction, s0=args.s0, n=args.n, nudge=args.nudge, t1=args.t1,
+                        out=args.out, progress=jax.process_index() == 0)
+    if jax.process_index() != 0:
+        return EXIT_OK  # process 0 fits, draws and prints
+    ok = int(jr.RESULTS.successful._value)
+    rows, flagged = [], {}
+    for i, p in enumerate(ds["psi0"].values):
+        for j, g in enumerate(ds["gap"].values):
+            code = int(ds["result"].values[i, j])
+            name = _result_name(code)
+            v = float(ds["v_s"].values[i, j])
+            rows.append(dict(psi0_deg=float(p), gap=float(g), v_s=v if math.isfinite(v) else None,
+                             snaps=code == ok, result=name))
+    out = dict(points=len(rows), snapping=sum(r["snaps"] for r in rows), netcdf=os.path.join(args.out,
+               "speed_plane.nc"), computed_points=len(ds.attrs["computed_points"]),
+               devices=int(ds.attrs["device_count"]), processes=int(ds.attrs["process_count"]))
+    for r in rows:
+        if r["result"] not in ("successful", "no_snap"):
+            flagged[r["result"]] = flagged.get(r["result"], 0) + 1
+    out["flagged"] = flagged
+    if flagged:
+        print("jaxrod speed-plane: points not successful (codes in the NetCDF file): "
+              + ", ".join(f"{k} x{v}" for k, v in sorted(flagged.items())), file=sys.stderr)
+    if out["snapping"] >= 4:
+        coef, err, rms = fit_plane(rows)
+        out.update(fit=dict(v_m=coef[0], a=coef[1], b=coef[2], stderr=err, rms=rms),
+                   paper=dict(v_m=PAPER_FIT[0], a=PAPER_FIT[1], b=PAPER_FIT[2]))
+        _plot_plane(rows, coef, os.path.join(args.out, "speed_plane.png"))
+        out["figure"] = os.path.join(args.out, "speed_plane.png")
+    _write_atomic(os.path.join(args.out, "speed_plane_fit.json"), lambda fh: json.dump(out, fh, indent=1))
+    print(json.dumps(out))
     return EXIT_NOT_CONVERGED if flagged else EXIT_OK
 
 

@@ -302,6 +302,52 @@ def _compilation_cache(jax):
         pass
 
 
+def add_distributed_args(p):
+    """`--coordinator`, `--num-processes`, `--process-id`: join a multi-process run."""
+    g = p.add_argument_group("several processes or hosts (jax.distributed; run the same command in each)")
+    g.add_argument("--coordinator", metavar="HOST:PORT", default=None,
+                   help="address of process 0's coordinator; on SLURM or Open MPI, give 'auto' to take "
+                        "everything from the job's environment")
+    g.add_argument("--num-processes", type=int, default=None, metavar="P", help="number of processes")
+    g.add_argument("--process-id", type=int, default=None, metavar="I", help="this process's index, 0 ... P-1")
+
+
+def start_distributed(args):
+    """`jax.distributed.initialize` from the `add_distributed_args` options (nothing when
+    `--coordinator` is not given). Bad combinations are an `InputError`."""
+    given = [args.num_processes is not None, args.process_id is not None]
+    if args.coordinator is None:
+        if any(given):
+            raise InputError("coordinator: --num-processes and --process-id need --coordinator HOST:PORT")
+        return
+    import jax
+
+    if args.coordinator == "auto":
+        if any(given):
+            raise InputError("coordinator: 'auto' takes the processes from the job's environment; "
+                             "leave out --num-processes and --process-id")
+        _c_stdout_to_stderr()
+        jax.distributed.initialize()
+        return
+    if not all(given):
+        raise InputError("num-processes: --coordinator HOST:PORT needs --num-processes and --process-id")
+    if args.num_processes < 1 or not 0 <= args.process_id < args.num_processes:
+        raise InputError(f"process-id: must lie in 0 ... {args.num_processes - 1} (--num-processes "
+                         f"{args.num_processes}), got {args.process_id}")
+    _c_stdout_to_stderr()
+    jax.distributed.initialize(args.coordinator, num_processes=args.num_processes, process_id=args.process_id)
+
+
+def _c_stdout_to_stderr():
+    """Send what the C++ runtime writes to file descriptor 1 (the collectives' connection
+    messages) to stderr, and keep Python's `sys.stdout` on the real stdout, so that `--json`
+    still prints exactly one JSON object there."""
+    sys.stdout.flush()
+    real = os.dup(1)
+    os.dup2(2, 1)
+    sys.stdout = os.fdopen(real, "w", buffering=1)
+
+
 def _cmd_equilibrium(args):
     scene = make_scene_from_args(args)  # validates before anything is compiled
     import jaxrod as jr
@@ -513,6 +559,8 @@ def main(argv=None):
         _quiet()
         try:
             args = _build_parser().parse_args(argv)
+            if hasattr(args, "coordinator"):
+                start_distributed(args)  # before JAX starts its backend
             _enable_x64()  # before anything is computed
             if args.command == "equilibrium":
                 return _cmd_equilibrium(args)

@@ -118,6 +118,8 @@ def _cmd_phase_diagram(args):
         jr.Mesh(args.n, args.refine)
     except ValueError as e:
         raise InputError(str(e)) from None
+    import jax  # joined to the other processes by `main` (`start_distributed`) when asked
+
     try:
         os.makedirs(args.out, exist_ok=True)
     except OSError as e:
@@ -127,8 +129,14 @@ def _cmd_phase_diagram(args):
     from ..branches import termination_gaps
 
     t0 = time.time()
-    ds = jr.phase_diagram(psis, gaps, s0=args.s0, n=args.n, refine=args.refine, out=args.out, batch=args.batch)
+    try:
+        ds = jr.phase_diagram(psis, gaps, s0=args.s0, n=args.n, refine=args.refine, out=args.out,
+                              batch=args.batch, split=args.split, progress=jax.process_index() == 0)
+    except ValueError as e:  # a multi-process run without a shared --out
+        raise InputError(str(e)) from None
     wall = time.time() - t0
+    if jax.process_index() != 0:
+        return EXIT_OK  # process 0 draws, prints and reports
     tg = None if args.no_termination else termination_gaps(psis, s0=args.s0, n=args.n)
     png = os.path.join(args.out, "phase_diagram.png")
     jr.plot_phase_diagram(ds, png, termination_gaps=tg,
@@ -136,6 +144,7 @@ def _cmd_phase_diagram(args):
     rec = {"out": args.out, "netcdf": os.path.join(args.out, "phase_diagram.nc"), "png": png,
            "psi0_deg": psis, "gaps": gaps, "s0": args.s0, "n": args.n, "refine": args.refine,
            "computed_chunks": ds.attrs["computed_chunks"], "wall_s": wall, "batch": ds.attrs["batch"],
+           "devices": int(ds.attrs["device_count"]), "processes": int(ds.attrs["process_count"]),
            "termination_gaps": None if tg is None else {f"{k:g}": [_fin(a) for a in v] for k, v in tg.items()}}
     # paths whose outcome is unknown although their start state exists (the continuation
     # gave up, or the landing failed): NaN there does not mean "does not snap"
@@ -168,7 +177,7 @@ def _cmd_phase_diagram(args):
 
 def register(sub):
     """Add `hysteresis` and `phase-diagram` to the `jaxrod` argument parser."""
-    from ._main import _EPILOG, DEFAULTS, add_scene_args
+    from ._main import _EPILOG, DEFAULTS, add_distributed_args, add_scene_args
 
     p = sub.add_parser("hysteresis", help="quasi-static hysteresis loop: fold height and energy vs alpha",
                        description="Follow both equilibria of a creased strip under symmetric clamp rotation\n"
@@ -185,7 +194,9 @@ def register(sub):
                        description="Critical clamp angles of both snapping paths over Psi0 x G/L, one\n"
                                    "compiled call per Psi0 (gaps in order, warm-started), or all Psi0 in one vmapped\n"
                                    "call (--batch vmap). Writes DIR/phase_diagram.nc (xarray, NetCDF3) and\n"
-                                   "DIR/phase_diagram.png; an interrupted run resumes from DIR/chunks/.",
+                                   "DIR/phase_diagram.png; an interrupted run resumes from DIR/chunks/. With several\n"
+                                   "devices (GPUs, or processes joined by --coordinator) the Psi0 are split across\n"
+                                   "them (--batch shard).",
                        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     q.add_argument("--psi0", default="30,60,90,120,180", metavar="LIST",
                    help="fold angles in degrees, comma list or START:STOP:STEP (default %(default)s)")
@@ -196,10 +207,16 @@ def register(sub):
     q.add_argument("--refine", type=float, default=DEFAULTS["refine"],
                    help="mesh refinement ratio at the crease (default %(default)g)")
     q.add_argument("--out", default="jaxrod-phase", metavar="DIR", help="output directory (default %(default)s)")
-    q.add_argument("--batch", choices=("auto", "scan", "vmap"), default="auto",
-                   help="scan: one compiled call per Psi0; vmap: every Psi0 in one vmapped call; auto: scan on "
-                        "the CPU (measured faster there), vmap on a GPU (default %(default)s)")
+    q.add_argument("--batch", choices=("auto", "scan", "vmap", "shard"), default="auto",
+                   help="scan: one compiled call per Psi0; vmap: every Psi0 in one vmapped call; shard: the Psi0 "
+                        "split across every device of every process (jaxrod.sweeps); auto: shard where JAX sees "
+                        "several devices, else scan on the CPU (measured faster there), vmap on a GPU "
+                        "(default %(default)s)")
+    q.add_argument("--split", choices=("shard_map", "sharding"), default="shard_map",
+                   help="--batch shard: jax.shard_map (each device runs its own loops) or jit with NamedSharding "
+                        "(default %(default)s)")
     q.add_argument("--no-termination", action="store_true",
                    help="do not compute the termination gaps G* (vertical lines) for the figure")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    add_distributed_args(q)
     q.set_defaults(handler=_cmd_phase_diagram)

@@ -3,7 +3,8 @@
 Lagrange's equations of the discrete strip with its inextensible links (`simulate`, RATTLE
 by default, any diffrax solver), clamp programs (`Protocol`), dissipation (`Dissipation`),
 the ready-made scenes (`snap_dynamics`: brink, ramp, asymmetric) and the snap speed of a
-design (`snap_speed`).
+design (`snap_speed`) and its map over fold angles and gaps (`speed_plane`, run across
+devices by `jaxrod.sweeps`).
 
 Layer: above branches (a brink starts from a snap angle); below design.
 """
@@ -19,4 +20,6 @@ from ._scenes import Start as Start
 from ._simulate import simulate as simulate
 from ._simulate import Trajectory as Trajectory
 from ._snap_speed import snap_speed as snap_speed
+from ._speed_plane import fit_speed_plane as fit_speed_plane
+from ._speed_plane import speed_plane as speed_plane
 from ._simulate import SOLVERS as SOLVERS

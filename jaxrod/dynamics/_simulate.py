@@ -200,7 +200,7 @@ def _verdict(sol, finite):
 @eqx.filter_jit
 def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, direction=1.0,
              stop_at_snap: bool = True, solver: str = "rattle", rtol=1e-8, atol=1e-8, dt=None,
-             dissipation: Dissipation = Dissipation(), baumgarte=20.0, n_fine: int | None = None,
+             dissipation: Dissipation | None = None, baumgarte=20.0, n_fine: int | None = None,
              n_frames: int = 64, frame_window=None, max_steps: int | None = None,
              courant: float | None = None, substeps: int | None = None, energy_tol=1e-2,
              constraint_tol=1e-6) -> Trajectory:
@@ -240,6 +240,8 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
 
     **Returns:** a [`jaxrod.Trajectory`][].
     """
+    if dissipation is None:
+        dissipation = Dissipation()  # (a default instance in the signature would start JAX's backend at import)
     check_run_settings(t1=t1, direction=direction, stop_at_snap=stop_at_snap, rtol=rtol, atol=atol, dt=dt,
                        dissipation=dissipation, baumgarte=baumgarte, n_fine=n_fine, n_frames=n_frames,
                        frame_window=frame_window, max_steps=max_steps, courant=courant,

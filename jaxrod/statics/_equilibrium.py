@@ -27,6 +27,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
+import numpy as np
 from jax import lax
 
 from ..linalg import kkt
@@ -80,7 +81,8 @@ def _residual(g, scene):
 
 
 MAX_ANGLE_STEP = 0.5  # rad
-_DELTAS = 10.0 ** jnp.arange(-8, 5)  # inertia-correction ladder, relative to max|diag T|
+# inertia-correction ladder, relative to max|diag T| (NumPy: importing jaxrod starts no JAX backend)
+_DELTAS = 10.0 ** np.arange(-8, 5)
 
 
 def _newton(scene, theta0, mu0, solver: Newton):
