@@ -185,3 +185,14 @@ def crosses(theta, h):
     h = np.asarray(h, float)
     x = np.concatenate([[[0.0, 0.0]], np.cumsum(h[:, None] * np.stack([np.cos(t), np.sin(t)], 1), 0)])
     return bool(np_crossings(x))
+
+
+HEAVY_LOOP = 4e6  # loop length of `heavy_member` (about 0.1 s on one CPU core)
+
+
+def heavy_member(member, shared):
+    """A sweep member that takes a while (a long scalar loop; tests that kill a sweep mid-run)."""
+    x = member["x"]
+    n = (shared * (1.0 + 0.1 * x)).astype(jnp.int32)
+    _, y = jax.lax.fori_loop(0, n, lambda i, c: (c[0], c[1] * 0.999999 + c[0] * 1e-6), (x, x))
+    return {"y": y}

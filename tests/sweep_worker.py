@@ -86,6 +86,11 @@ for job in args.jobs.split(","):
                         "device": ds["device"].values.tolist()}
         res["speed_direct"] = [[float(jr.snap_speed(jr.make_scene(p, g, 0, n=16))) for g in (0.4, 0.6)]
                                for p in (60.0, 180.0)]
+    elif job == "heavy":
+        from helpers import HEAVY_LOOP, heavy_member
+
+        jr.sweep(heavy_member, {"x": np.arange(12.0)}, shared=np.float64(HEAVY_LOOP), out=args.out, name="heavy",
+                 progress=False)
     elif job == "design":
         import jaxrod.design as dsn
 

@@ -300,3 +300,31 @@ def test_cli_speed_plane_on_two_devices(tmp_path):
     direct = [float(jr.snap_speed(jr.make_scene(p, g, 0, n=16), t1=4.0)) for p, g in
               zip(ds["psi0"].values, ds["gap"].values)]
     np.testing.assert_allclose(ds["v_s"].values, direct, rtol=1e-9)
+
+
+@pytest.mark.slow
+def test_sweep_resumes_after_sigkill(tmp_path):
+    """A real kill (SIGKILL) in the middle of a sweep: the rerun reads back every finished batch,
+    computes exactly the others, and the whole equals a run member by member."""
+    import signal
+    import time
+
+    from helpers import HEAVY_LOOP, heavy_member
+
+    store = tmp_path / "store"
+    p = subprocess.Popen([sys.executable, WORKER, "--jobs", "heavy", "--result", str(tmp_path / "r.json"),
+                          "--out", str(store)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    chunks = store / "chunks"
+    t0 = time.time()
+    while time.time() - t0 < 300 and len(list(chunks.glob("points_*.nc")) if chunks.exists() else []) < 3:
+        time.sleep(0.05)
+    p.send_signal(signal.SIGKILL)
+    p.wait()
+    done = sorted(int(f.name.split("_")[1]) for f in chunks.glob("points_*.nc"))
+    assert 3 <= len(done) < 12, done  # killed in the middle
+    ds = jr.sweep(heavy_member, {"x": np.arange(12.0)}, shared=np.float64(HEAVY_LOOP), out=str(store), name="heavy",
+                  progress=False)
+    assert ds.attrs["computed_points"] == [i for i in range(12) if i not in done]
+    f = jax.jit(heavy_member)
+    ref = [float(f({"x": jnp.asarray(float(i))}, jnp.asarray(HEAVY_LOOP))["y"]) for i in range(12)]
+    np.testing.assert_array_equal(ds["y"].values, ref)
