@@ -147,3 +147,20 @@ def package_version() -> str:
         return importlib.metadata.version("jaxrod")
     except importlib.metadata.PackageNotFoundError:
         return "0.0.0"
+
+
+def check_grid(psi0_deg, gaps, s0, what: str):
+    """The fold angles (deg) and gaps of a (Psi0, G/L) grid as lists of floats, each value and
+    `s0` checked; `what` (the function's name) is named when float64 is not enabled."""
+    psis = [float(p) for p in np.atleast_1d(psi0_deg)]
+    gs = [float(g) for g in np.atleast_1d(gaps)]
+    if not psis or not gs:
+        raise ValueError("psi0 and gaps must each hold at least one value")
+    for p in psis:
+        check_param("psi0", p, lo=0.0, hi=180.0, hi_open=False, unit=" deg")
+    for g in gs:
+        check_param("gap", g, lo=0.0, hi=1.0)
+    check_param("s0", s0, lo=0.0)
+    if not jax.config.jax_enable_x64:
+        raise ValueError(f"{what} needs float64; enable it with jax.config.update('jax_enable_x64', True)")
+    return psis, gs

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import os
 import functools
 
 import jax
@@ -187,6 +188,11 @@ def crosses(theta, h):
     return bool(np_crossings(x))
 
 
+# the phase-diagram grid of the sweep tests: test_phase_diagram's (its compiled chunk is shared)
+PHASE_PSI = [30.0, 60.0, 90.0, 180.0]
+PHASE_GAPS = [0.3, 0.5, 0.8, 0.82]
+PHASE_N = 40
+
 HEAVY_LOOP = 4e6  # loop length of `heavy_member` (about 0.1 s on one CPU core)
 
 
@@ -196,3 +202,41 @@ def heavy_member(member, shared):
     n = (shared * (1.0 + 0.1 * x)).astype(jnp.int32)
     _, y = jax.lax.fori_loop(0, n, lambda i, c: (c[0], c[1] * 0.999999 + c[0] * 1e-6), (x, x))
     return {"y": y}
+
+
+SWEEP_WORKER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "sweep_worker.py")
+
+
+def run_sweep_workers(tmp_path, jobs, devices, processes=1, timeout=600):
+    """Run `tests/sweep_worker.py --jobs JOBS` in `processes` child processes with `devices`
+    virtual CPU devices each (joined by `jax.distributed` on a free loopback port when more
+    than one); returns each process's result dict."""
+    import json
+    import socket
+    import subprocess
+    import sys
+
+    port = 0
+    if processes > 1:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+    tmp_path.mkdir(parents=True, exist_ok=True)
+    result = str(tmp_path / "result.json")
+    procs = [subprocess.Popen([sys.executable, SWEEP_WORKER, "--devices", str(devices),
+                               "--num-processes", str(processes), "--process-id", str(i), "--port", str(port),
+                               "--jobs", jobs, "--result", result, "--out", str(tmp_path / "store")],
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+             for i in range(processes)]
+    logs = []
+    for p in procs:
+        try:
+            logs.append(p.communicate(timeout=timeout)[0])
+        except subprocess.TimeoutExpired:
+            for q in procs:
+                q.kill()
+            raise
+    for p, log in zip(procs, logs):
+        assert p.returncode == 0, log[-3000:]
+    paths = [result] + [f"{result}.{i}" for i in range(1, processes)]
+    return [json.load(open(pth)) for pth in paths]

@@ -32,9 +32,7 @@ import numpy as np  # noqa: E402
 
 import jaxrod as jr  # noqa: E402
 
-PHASE_PSI = [30.0, 60.0, 90.0, 180.0]
-PHASE_GAPS = [0.3, 0.5, 0.8, 0.82]  # the grid of test_phase_diagram (its compiled chunk is in the shared cache)
-PHASE_N = 40
+from helpers import PHASE_GAPS, PHASE_N, PHASE_PSI  # noqa: E402
 
 
 def toy(member, shared):

@@ -89,6 +89,17 @@ def test_cli_default_is_extrapolated(capsys):
         assert rec[f"error_estimate_{name}_deg"] > 0 and rec[f"meshes_consistent_{name}"] is True
     # the paper's asymmetry at (60 deg, 0.5): snaps both ways, alpha_c_up < |alpha_c_down|
     assert 0 < rec["alpha_c_up_deg"] < -rec["alpha_c_down_deg"]
+    # both meshes' codes and the combined one are successful, the meshes consistent
+    for e in (x.up, x.down):
+        ok = jr.RESULTS.successful
+        assert e.result == ok and e.result_coarse == ok and e.result_fine == ok and bool(e.consistent)
+    # the down state does not exist at alpha = 0 at (30 deg, 0.8): the up path starts from the
+    # snap-down path's end, which the CLI prints and flags with exit code 3
+    assert main(["snap-angles", "--psi0", "30", "--gap", "0.8", "--json"]) == 3
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["alpha_c_up_deg"] is None and rec["kind_up"] == "none"
+    assert rec["result_up"] == "successful" and rec["result_down"] == "successful"
+    assert rec["start_up"] == "start_substituted" and rec["start_down"] == "successful"
 
 
 @pytest.mark.slow  # 77 s on 2 cores (three reverse-mode compiles); the implicit gradients themselves are

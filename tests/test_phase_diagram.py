@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import jaxrod as jr
+from helpers import PHASE_GAPS, PHASE_N, PHASE_PSI, run_sweep_workers
 from jaxrod.branches import _phase
 
 
@@ -150,15 +151,20 @@ def test_cli_json(tmp_path, monkeypatch, capsys):
     assert json.loads(capsys.readouterr().out)["flagged"] == {}
 
 
-def test_warm_started_chunk_equals_single_calls(tmp_path):
+@pytest.fixture(scope="module")
+def chunks(tmp_path_factory):
+    """The real computation on a small grid, one compiled call per fold angle."""
+    return jr.phase_diagram(PHASE_PSI, PHASE_GAPS, n=PHASE_N, out=str(tmp_path_factory.mktemp("pd")), batch="scan",
+                            progress=False)
+
+
+def test_warm_started_chunk_equals_single_calls(chunks):
     """The real computation: the warm-started chunk (start states by Newton from the
     previous gap, `snap_angles` without the extended-system polish) gives the same kinds,
     start codes and landing states as single polished `snap_angles` calls, and alpha_c to
     1e-6 deg; a gap where the down state does not exist (30 deg, 0.8) falls back to the
     homotopy and does not poison the gaps after it."""
-    gaps = [0.3, 0.5, 0.8, 0.82]
-    n = 40
-    ds = jr.phase_diagram([30.0, 60.0], gaps, n=n, out=str(tmp_path), progress=False)
+    gaps, n, ds = PHASE_GAPS, PHASE_N, chunks
     f = jax.jit(jr.snap_angles)
     for p in (30.0, 60.0):
         for g in gaps:
@@ -180,6 +186,20 @@ def test_warm_started_chunk_equals_single_calls(tmp_path):
     down = jr.initial_state(jr.make_scene(30.0, 0.8, 0.0, n=n), "down")
     assert down.result == jr.RESULTS.state_not_found
     assert int(warm.sel(psi0=30.0, gap=0.8)) == 1 and int(warm.sel(psi0=30.0, gap=0.82)) == 1
+
+
+def test_fold_angles_split_across_four_devices(chunks, tmp_path):
+    """`batch="shard"` on 4 virtual CPU devices (a child process: JAX reads the device count
+    when it starts): the numbers of the one-call-per-Psi0 chunks (another compiled program:
+    equal to round-off), the same kinds and codes, one fold angle per device."""
+    (r,) = run_sweep_workers(tmp_path, "phase", devices=4)
+    assert r["device_count"] == 4
+    for k, got in r["phase_shard"].items():
+        want = np.where(np.isnan(chunks[k].values), -999.0, chunks[k].values)
+        if k.startswith(("kind", "result")):
+            np.testing.assert_array_equal(got, want, err_msg=k)
+        else:
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-9, err_msg=k)
 
 
 def test_vmap_mode_computes_missing_chunks_in_one_call(tmp_path, monkeypatch):

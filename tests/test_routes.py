@@ -91,6 +91,8 @@ def test_fold_path_has_no_second_route():
         jr.brink(sc, "up", snap=snap, route="third")
 
 
+@pytest.mark.slow  # ~45 s (a forward-mode compile of snap_routes); the implicit derivative of a critical
+# point it rests on is checked against central differences in CI by test_critical.py
 def test_second_critical_angle_gradient_matches_central_differences():
     def a2(psi0):
         sc = jr.make_scene(jnp.degrees(psi0), 0.46, s0=0.02, n=N)

@@ -1,5 +1,6 @@
 """Sweeps across devices and processes (`jaxrod.sweeps`): the same numbers as one device, every
-device used, a resumable store that loses no finished point and recomputes none.
+device used, a resumable store that loses no finished point and recomputes none. (The phase
+diagram split across four devices is checked in test_phase_diagram.py.)
 
 Several devices need a fresh JAX (`--xla_force_host_platform_device_count` is read when the
 CPU backend starts), so those checks run `tests/sweep_worker.py` in child processes: one
@@ -18,9 +19,7 @@ import pytest
 import xarray as xr
 
 import jaxrod as jr
-
-HERE = os.path.dirname(os.path.abspath(__file__))
-WORKER = os.path.join(HERE, "sweep_worker.py")
+from helpers import SWEEP_WORKER as WORKER, run_sweep_workers
 X = np.array([0.0, 1.0, 2.0, -1.0, 3.0, 4.0, 5.0])
 
 
@@ -38,33 +37,6 @@ def reference():
     f = jax.jit(toy)
     outs = [f({"x": jnp.asarray(x)}, jnp.asarray(1.5)) for x in X]
     return {k: np.stack([np.asarray(o[k]) for o in outs]) for k in ("y", "k", "v")}
-
-
-def _run_workers(tmp_path, jobs, devices, processes=1, timeout=600):
-    port = 0
-    if processes > 1:
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            port = s.getsockname()[1]
-    tmp_path.mkdir(parents=True, exist_ok=True)
-    result = str(tmp_path / "result.json")
-    procs = [subprocess.Popen([sys.executable, WORKER, "--devices", str(devices), "--num-processes", str(processes),
-                               "--process-id", str(i), "--port", str(port), "--jobs", jobs, "--result", result,
-                               "--out", str(tmp_path / "store")],
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-             for i in range(processes)]
-    logs = []
-    for p in procs:
-        try:
-            logs.append(p.communicate(timeout=timeout)[0])
-        except subprocess.TimeoutExpired:
-            for q in procs:
-                q.kill()
-            raise
-    for p, log in zip(procs, logs):
-        assert p.returncode == 0, log[-3000:]
-    paths = [result] + [f"{result}.{i}" for i in range(1, processes)]
-    return [json.load(open(pth)) for pth in paths]
 
 
 def _same_toy(got, ref):
@@ -172,21 +144,19 @@ def _same_phase(a, b, tol):
 
 
 def test_four_virtual_devices(tmp_path):
-    (r,) = _run_workers(tmp_path, "toy,phase,phase_scan", devices=4)
+    (r,) = run_sweep_workers(tmp_path, "toy", devices=4)
     assert r["device_count"] == 4 and r["process_count"] == 1
     ref = reference()
     for split in ("shard_map", "sharding"):
         got = r[f"toy_{split}"]
         _same_toy(got, ref)
         assert got["device"] == [0, 1, 2, 3, 0, 1, 2]  # every device used, members dealt in order
-    # the phase diagram's fold angles split across the devices: the one-call-per-Psi0 numbers
-    # (another compiled program: equal to round-off), the same kinds and codes
-    # (the grid holds a gap where the down state does not exist: 30 deg, 0.8, its own code)
-    _same_phase(r["phase_shard"], r["phase_scan"], 1e-9)
+    # (the phase diagram split across four devices: test_phase_diagram.py, beside the chunks it
+    # is compared with)
 
 
 def test_two_processes_on_the_loopback(tmp_path):
-    r0, r1 = _run_workers(tmp_path, "toy", devices=2, processes=2)
+    r0, r1 = run_sweep_workers(tmp_path, "toy", devices=2, processes=2)
     assert r0["process_count"] == r1["process_count"] == 2 and r0["device_count"] == 4
     assert set(r0["local"]).isdisjoint(r1["local"])
     ref = reference()
@@ -200,18 +170,18 @@ def test_two_processes_on_the_loopback(tmp_path):
 
 @pytest.mark.slow
 def test_devices_and_processes_give_identical_phase_diagrams(tmp_path):
-    (r4,) = _run_workers(tmp_path / "four", "phase,phase_sharding,phase_one,phase_scan", devices=4)
+    (r4,) = run_sweep_workers(tmp_path / "four", "phase,phase_sharding,phase_one,phase_scan", devices=4)
     _same_phase(r4["phase_shard"], r4["phase_one"], 0)  # 4 devices vs 1: bit for bit
     _same_phase(r4["phase_sharding"], r4["phase_one"], 0)
     _same_phase(r4["phase_shard"], r4["phase_scan"], 1e-9)
-    r0, r1 = _run_workers(tmp_path / "two", "phase", devices=2, processes=2)
+    r0, r1 = run_sweep_workers(tmp_path / "two", "phase", devices=2, processes=2)
     _same_phase(r0["phase_shard"], r4["phase_shard"], 0)
     _same_phase(r1["phase_shard"], r4["phase_shard"], 0)
 
 
 @pytest.mark.slow
 def test_speed_plane_on_two_devices(tmp_path):
-    (r,) = _run_workers(tmp_path, "speed", devices=2)
+    (r,) = run_sweep_workers(tmp_path, "speed", devices=2)
     # the same numbers as `snap_speed` one scene at a time (another compiled program: round-off)
     np.testing.assert_allclose(r["speed"]["v_s"], r["speed_direct"], rtol=1e-9)
     assert r["speed"]["result"] == [[0, 0], [0, 0]]
@@ -220,7 +190,7 @@ def test_speed_plane_on_two_devices(tmp_path):
 
 @pytest.mark.slow
 def test_multistart_design_split_across_devices(tmp_path):
-    (r,) = _run_workers(tmp_path, "design", devices=4)
+    (r,) = run_sweep_workers(tmp_path, "design", devices=4)
     np.testing.assert_allclose(r["design_devices"]["values"], r["design_loop"]["values"], rtol=1e-10, atol=1e-12)
     assert r["design_devices"]["reached"] == r["design_loop"]["reached"]
 

@@ -143,16 +143,14 @@ def test_failed_refinement_says_no_derivative():
 
 
 def test_extrapolated_paths_carry_both_meshes_codes():
-    """A continuation cut short on both meshes is not a clean 'does not snap'."""
+    """A continuation cut short on both meshes is not a clean 'does not snap'. (Both meshes
+    successful give a successful combination: test_extrapolate.py's CLI test.)"""
     sc = jr.make_scene(psi0_deg=60, gap=0.5, n=N // 2)
     x = jr.snap_angles_extrapolated(sc, settings=jr.Continuation(max_points=3), polish=False)
     for e in (x.up, x.down):
         assert e.result == jr.RESULTS.continuation_incomplete
         assert e.result_coarse == jr.RESULTS.continuation_incomplete
         assert e.result_fine == jr.RESULTS.continuation_incomplete
-    good = jr.snap_angles_extrapolated(sc, polish=False)
-    for e in (good.up, good.down):
-        assert e.result == OK and e.result_coarse == OK and e.result_fine == OK and bool(e.consistent)
 
 
 @pytest.mark.parametrize("leaf", ["psi0", "gap"])

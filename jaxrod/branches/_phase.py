@@ -60,7 +60,7 @@ from jax import lax
 from ._continuation import Continuation, SymmetricAlpha
 from ..statics import float_scene, solve_equilibrium
 from ..statics import initial_state_signed, still_tracked
-from .._misc import check_param, package_version, run_if as _run_if, run_if_each
+from .._misc import check_grid, package_version, run_if as _run_if, run_if_each
 from ..model import Clamps, Mesh, Scene, Strip
 from ._snap import _snap_angles_from
 from ..results import RESULTS
@@ -249,18 +249,8 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     """
     import xarray as xr
 
-    psis = [float(p) for p in np.atleast_1d(psi0_deg)]
-    gaps = [float(g) for g in np.atleast_1d(gaps)]
-    if not psis or not gaps:
-        raise ValueError("psi0 and gaps must each hold at least one value")
-    for p in psis:
-        check_param("psi0", p, lo=0.0, hi=180.0, hi_open=False, unit=" deg")
-    for g in gaps:
-        check_param("gap", g, lo=0.0, hi=1.0)
-    check_param("s0", s0, lo=0.0)
+    psis, gaps = check_grid(psi0_deg, gaps, s0, "phase_diagram")
     mesh = Mesh(n, refine)
-    if not jax.config.jax_enable_x64:
-        raise ValueError("phase_diagram needs float64; enable it with jax.config.update('jax_enable_x64', True)")
     attrs = _attrs(gaps, s0, n, refine)
     if out is not None:
         os.makedirs(os.path.join(out, "chunks"), exist_ok=True)

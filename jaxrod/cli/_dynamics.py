@@ -394,14 +394,23 @@ def _cmd_speed_plane(args):
             first.setdefault((r["psi0_deg"], r["gap"]), r)
     rows = [first[pt] for pt in grid]
     out = dict(points=len(rows), snapping=sum(bool(r["snaps"]) for r in rows), csv=path, computed_points=computed)
-    # every point whose code is neither `successful` nor `no_snap` (the codes are in the CSV)
+    return _report_plane(args, rows, out, "the CSV")
+
+
+def _report_plane(args, rows, out, where):
+    """Count the flagged points, fit the plane and draw it (with 4 snapping points or more),
+    write DIR/speed_plane_fit.json and print `out` as JSON; the exit status says whether
+    every point is trusted (every file is written either way)."""
+    import sys
+
+    # every point whose code is neither `successful` nor `no_snap` (the codes are in `where`)
     flagged = {}
     for r in rows:
         if r["result"] not in ("successful", "no_snap"):
             flagged[r["result"]] = flagged.get(r["result"], 0) + 1
     out["flagged"] = flagged
     if flagged:
-        print("jaxrod speed-plane: points not successful (codes in the CSV): "
+        print(f"jaxrod speed-plane: points not successful (codes in {where}): "
               + ", ".join(f"{k} x{v}" for k, v in sorted(flagged.items())), file=sys.stderr)
     if out["snapping"] >= 4:
         coef, err, rms = fit_plane(rows)
@@ -411,15 +420,12 @@ def _cmd_speed_plane(args):
         out["figure"] = os.path.join(args.out, "speed_plane.png")
     _write_atomic(os.path.join(args.out, "speed_plane_fit.json"), lambda fh: json.dump(out, fh, indent=1))
     print(json.dumps(out))
-    # every file is written either way; the exit status says whether every point is trusted
     return EXIT_NOT_CONVERGED if flagged else EXIT_OK
 
 
 def _speed_plane_sharded(args, psis, gaps):
     """`jaxrod speed-plane --batch shard`: `jaxrod.speed_plane` across every device of every
     process (resumable from DIR/chunks), then the same fit, figure and JSON as the point-by-point run."""
-    import sys
-
     import jax
 
     import jaxrod as jr
@@ -431,7 +437,7 @@ def _speed_plane_sharded(args, psis, gaps):
     if jax.process_index() != 0:
         return EXIT_OK  # process 0 fits, draws and prints
     ok = int(jr.RESULTS.successful._value)
-    rows, flagged = [], {}
+    rows = []
     for i, p in enumerate(ds["psi0"].values):
         for j, g in enumerate(ds["gap"].values):
             code = int(ds["result"].values[i, j])
@@ -442,22 +448,7 @@ def _speed_plane_sharded(args, psis, gaps):
     out = dict(points=len(rows), snapping=sum(r["snaps"] for r in rows), netcdf=os.path.join(args.out,
                "speed_plane.nc"), computed_points=len(ds.attrs["computed_points"]),
                devices=int(ds.attrs["device_count"]), processes=int(ds.attrs["process_count"]))
-    for r in rows:
-        if r["result"] not in ("successful", "no_snap"):
-            flagged[r["result"]] = flagged.get(r["result"], 0) + 1
-    out["flagged"] = flagged
-    if flagged:
-        print("jaxrod speed-plane: points not successful (codes in the NetCDF file): "
-              + ", ".join(f"{k} x{v}" for k, v in sorted(flagged.items())), file=sys.stderr)
-    if out["snapping"] >= 4:
-        coef, err, rms = fit_plane(rows)
-        out.update(fit=dict(v_m=coef[0], a=coef[1], b=coef[2], stderr=err, rms=rms),
-                   paper=dict(v_m=PAPER_FIT[0], a=PAPER_FIT[1], b=PAPER_FIT[2]))
-        _plot_plane(rows, coef, os.path.join(args.out, "speed_plane.png"))
-        out["figure"] = os.path.join(args.out, "speed_plane.png")
-    _write_atomic(os.path.join(args.out, "speed_plane_fit.json"), lambda fh: json.dump(out, fh, indent=1))
-    print(json.dumps(out))
-    return EXIT_NOT_CONVERGED if flagged else EXIT_OK
+    return _report_plane(args, rows, out, "the NetCDF file")
 
 
 def _plot_plane(rows, coef, path):

@@ -17,7 +17,7 @@ import numpy as np
 
 import jax.numpy as jnp
 
-from .._misc import check_param
+from .._misc import check_grid
 from ..model import Clamps, Mesh, Scene, Strip
 from ..statics import float_scene
 from ..sweeps import grid, MODES, ShardedMap, sweep
@@ -58,19 +58,7 @@ def speed_plane(psi0_deg, gaps, *, direction="up", s0=0.02, n=48, nudge=NUDGE, t
     `energy_drift`, `num_steps`, `result` (RESULTS codes: `successful`, `no_snap`, ...) and
     `device`, with the sweep's provenance attributes. Needs float64.
     """
-    import jax
-
-    psis = [float(p) for p in np.atleast_1d(psi0_deg)]
-    gs = [float(g) for g in np.atleast_1d(gaps)]
-    if not psis or not gs:
-        raise ValueError("psi0 and gaps must each hold at least one value")
-    for p in psis:
-        check_param("psi0", p, lo=0.0, hi=180.0, hi_open=False, unit=" deg")
-    for g in gs:
-        check_param("gap", g, lo=0.0, hi=1.0)
-    check_param("s0", s0, lo=0.0)
-    if not jax.config.jax_enable_x64:
-        raise ValueError("speed_plane needs float64; enable it with jax.config.update('jax_enable_x64', True)")
+    psis, gs = check_grid(psi0_deg, gaps, s0, "speed_plane")
     mesh = Mesh(n)
     if split not in MODES:
         raise ValueError(f"split must be one of {MODES}, got {split!r}")
