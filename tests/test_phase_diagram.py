@@ -188,6 +188,46 @@ def test_warm_started_chunk_equals_single_calls(chunks):
     assert int(warm.sel(psi0=30.0, gap=0.8)) == 1 and int(warm.sel(psi0=30.0, gap=0.82)) == 1
 
 
+def _traced_fake_chunk(psi0, gaps, s0, mesh, settings=None):
+    """A traceable stand-in for the compiled chunk (deterministic values; one NaN angle)."""
+    import jax.numpy as jnp
+
+    out = {k: jnp.sin(psi0 * (i + 1) + 3.0 * gaps) for i, k in enumerate(_phase.VARIABLES)}
+    for k in ("kind_up", "kind_down", "start_up", "start_down", "result_up", "result_down", "warm_starts"):
+        out[k] = (jnp.arange(gaps.size) % 3).astype(jnp.int32)
+    out["alpha_c_down"] = out["alpha_c_down"].at[0].set(jnp.nan)
+    return out
+
+
+def test_shard_batches_the_fold_angles(monkeypatch, tmp_path):
+    """`batch="shard"`: the fold angles still to compute go through `jaxrod.ShardedMap` in
+    batches of `per_device` x devices, each finished fold angle is written and reported, a
+    rerun reads them back, and the numbers are those of the one-call-per-Psi0 path."""
+    monkeypatch.setattr(_phase, "_chunk", _traced_fake_chunk)
+    _phase._sharded.cache_clear()  # no ShardedMap traced with the real chunk
+    try:
+        psis, gaps = [30.0, 60.0, 90.0, 120.0, 180.0], [0.2, 0.4, 0.6]
+        seen = []
+        kw = dict(n=8, progress=False, on_chunk=lambda p, c: seen.append((p, c)))
+        ds = jr.phase_diagram(psis, gaps, out=str(tmp_path), batch="shard", per_device=2, **kw)
+        assert ds.attrs["batch"] == "shard" and ds.attrs["computed_chunks"] == psis
+        assert seen == [(p, True) for p in psis]
+        ref = jr.phase_diagram(psis, gaps, batch="scan", **kw)
+        for k in _phase.VARIABLES:
+            np.testing.assert_array_equal(ds[k].values, ref[k].values, err_msg=k)
+        os.remove(_phase._chunk_path(str(tmp_path), 90.0))
+        again = jr.phase_diagram(psis, gaps, out=str(tmp_path), batch="shard", per_device=2, **kw)
+        assert again.attrs["computed_chunks"] == [90.0]
+        for k in _phase.VARIABLES:
+            np.testing.assert_array_equal(again[k].values, ref[k].values, err_msg=k)
+        for k in ("jaxrod_version", "jax_version", "backend", "device_count", "process_count", "date_utc"):
+            assert k in again.attrs, k
+    finally:
+        _phase._sharded.cache_clear()
+
+
+@pytest.mark.slow  # a compile of the sharded chunk (~30 s); CI runs the sweep layer on 4 devices
+# (test_sweeps.py) and the sharded phase diagram's batching with a stand-in chunk (above)
 def test_fold_angles_split_across_four_devices(chunks, tmp_path):
     """`batch="shard"` on 4 virtual CPU devices (a child process: JAX reads the device count
     when it starts): the numbers of the one-call-per-Psi0 chunks (another compiled program:

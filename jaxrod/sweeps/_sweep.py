@@ -157,7 +157,9 @@ def sweep(fn, points, *, shared=None, out=None, name="sweep", attrs=None, dims=N
       dataset's file name; `attrs` a dict of settings stored with it (part of the
       fingerprint: give every setting `fn` closes over, such as the mesh size).
     - `dims`: dict output name -> names of its axes beyond `point` (default `<name>_<k>`).
-    - `devices`, `per_device`, `mode`: as [`ShardedMap`][jaxrod.sweeps.ShardedMap].
+    - `devices`, `per_device`, `mode`: as [`ShardedMap`][jaxrod.sweeps.ShardedMap]. `fn` may
+      itself be a `ShardedMap` (then these three are its own): repeated sweeps of one
+      function then reuse its compiled program instead of tracing and compiling a new one.
     - `progress`: a tqdm bar over points (process 0); `on_batch(indices)` is called after each
       computed batch is stored.
 
