@@ -32,6 +32,7 @@ GAPS = [round(0.2 + 0.05 * i, 2) for i in range(13)]
 PSI_A = [20.0, 40.0, 60.0, 80.0, 100.0, 120.0, 150.0, 180.0]
 PSI_B = [round(22.0 + 5.0 * i, 1) for i in range(32)]  # 22 ... 177 deg
 N = 48
+POINT_GAPS = [0.3, 0.5, 0.7, 0.8, 0.9]
 
 
 def worker(args):
@@ -58,6 +59,26 @@ def worker(args):
     res["kind_up"] = a["kind_up"].values.tolist()
     res["alpha_c_up_b"] = np.nan_to_num(b["alpha_c_up"].values, nan=-999).tolist()
     if args.member_costs:
+        # snap angles point by point (both paths): points that snap against points that do not
+        import jax.numpy as jnp
+
+        mesh = jr.Mesh(N)
+
+        def angles(pt, _):
+            r = jr.snap_angles(jr.Scene(jr.Strip(psi0=jnp.radians(pt["psi0"])), jr.Clamps(pt["gap"]), mesh))
+            return {"snaps": r.up.snaps.astype(jnp.int32) + r.down.snaps.astype(jnp.int32)}
+
+        sm = jr.ShardedMap(angles)
+        pts = jr.grid(psi0=[30.0, 90.0, 180.0], gap=POINT_GAPS)
+        sm({k: v[:1] for k, v in pts.items()})  # compile
+        point_costs, snapping = [], []
+        for i in range(pts["psi0"].size):
+            t0 = time.perf_counter()
+            out, _ = sm({k: v[i:i + 1] for k, v in pts.items()})
+            point_costs.append(time.perf_counter() - t0)
+            snapping.append(int(out["snaps"][0]))
+        res["point_costs"], res["point_snapping_paths"] = point_costs, snapping
+        res["points"] = {k: v.tolist() for k, v in pts.items()}
         costs = []
         for p in PSI_B:
             t0 = time.perf_counter()
@@ -121,12 +142,18 @@ def main():
                          speedup=round(base["run_s"] / r["run_s"], 2), max_diff_deg=err, same_kinds=same_kinds))
         if "member_costs" in r:
             costs = r["member_costs"]
+            points = dict(points=r["points"], cost_s=[round(c, 4) for c in r["point_costs"]],
+                          snapping_paths=r["point_snapping_paths"])
     imb = {d: round(imbalance(costs, d), 3) for d in (2, 4, 8)}
     out = dict(benchmark="bench_sweep", date=datetime.date.today().isoformat(), machine=platform.processor()
                or platform.machine(), cpus=os.cpu_count(), python=platform.python_version(),
                grid=dict(psi0_deg=PSI_A, psi0_deg_run=PSI_B, gaps=GAPS, n=N), rows=rows,
                member_costs_s=[round(c, 3) for c in costs], imbalance=imb,
-               member_cost_spread=round(max(costs) / (sum(costs) / len(costs)), 3))
+               member_cost_spread=round(max(costs) / (sum(costs) / len(costs)), 3), snap_angle_points=points)
+    pc, sn = np.asarray(points["cost_s"]), np.asarray(points["snapping_paths"])
+    by = {k: float(np.mean(pc[sn == k])) for k in sorted(set(sn.tolist()))}
+    out["snap_angle_point_cost_by_snapping_paths"] = by
+    out["snap_angle_point_imbalance"] = {d: round(imbalance(pc.tolist(), d), 3) for d in (2, 4, 8)}
     res_dir = os.path.join(HERE, "results")
     with open(os.path.join(res_dir, "sweep.json"), "w") as fh:
         json.dump(out, fh, indent=1)
@@ -143,7 +170,12 @@ def main():
     lines += ["", f"Load balance: the {len(costs)} rows alone cost "
               f"{min(costs):.2f} ... {max(costs):.2f} s (max / mean {out['member_cost_spread']}). "
               "Dealt in order in batches of D, the batches cost this much more than a perfect split: "
-              + ", ".join(f"D = {d}: {v}x" for d, v in imb.items()) + "."]
+              + ", ".join(f"D = {d}: {v}x" for d, v in imb.items()) + ".",
+              "", f"Snap angles point by point (`snap_angles`, both paths, N = {N}, Psi0 = 30, 90, 180 deg x "
+              f"G/L = {', '.join(map(str, POINT_GAPS))}): mean cost by the number of paths that snap: "
+              + ", ".join(f"{k} paths {v * 1e3:.0f} ms" for k, v in by.items())
+              + "; dealt in order in batches of D: "
+              + ", ".join(f"D = {d}: {v}x" for d, v in out["snap_angle_point_imbalance"].items()) + "."]
     with open(os.path.join(res_dir, "sweep.md"), "w") as fh:
         fh.write("\n".join(lines) + "\n")
     print("\n".join(lines))

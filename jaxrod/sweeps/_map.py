@@ -18,8 +18,8 @@ Two ways to split (the `mode`):
   done (an all-reduce per iteration).
 
 Both give identical numbers. `benchmarks/bench_sweep.py` measures them side by side: on
-2 CPU cores the phase diagram ran 2.4x faster than one device with `"shard_map"` over 2
-devices, and 2.6x slower than one device with `"sharding"`.
+2 CPU cores the phase diagram ran 2.1x faster than one device with `"shard_map"` over 2
+devices, and 2.8x slower than one device with `"sharding"`.
 
 A batch holds `size = devices x per_device` members; `__call__` pads a shorter one by
 repeating its last member and drops the padding from the result.
