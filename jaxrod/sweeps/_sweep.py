@@ -131,13 +131,14 @@ def _read_store(chunks, fingerprint, values, device, done, names, dims):
             if idx.size == 0 or idx.min() < 0 or idx.max() >= done.size:
                 continue
             got = {k: ds[k].values for k in names}
+            dev = ds["device"].values
             if any(ds[k].dims != ("point",) + dims[k] or got[k].shape[1:] != values[k].shape[1:] for k in names):
                 continue
         except Exception:  # a foreign or damaged file: its points are computed again
             continue
         for k in names:
             values[k][idx] = got[k]
-        device[idx] = ds["device"].values
+        device[idx] = dev
         done[idx] = True
 
 
