@@ -24,9 +24,6 @@ from ..sweeps import grid, MODES, ShardedMap, sweep
 from ._scenes import NUDGE
 from ._snap_speed import _options, _run
 
-OUTPUTS = ("v_s", "v_s_raw", "alpha_c_deg", "kind", "t_peak", "energy_drift", "num_steps", "result")
-
-
 def _member(point, shared, *, mesh, opts):
     scene = float_scene(Scene(Strip(psi0=jnp.radians(point["psi0"]), s0=shared), Clamps(point["gap"]), mesh))
     r = _run(scene, *opts)

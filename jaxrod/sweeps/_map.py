@@ -86,7 +86,6 @@ class ShardedMap:
         devices = list(jax.devices() if devices is None else devices)
         if not devices:
             raise ValueError("devices: at least one device is needed")
-        self.fn = fn
         self.devices = devices
         self.per_device = int(per_device)
         self.mode = mode
@@ -126,10 +125,19 @@ class ShardedMap:
         out = _gather(self._fn(xs, sh))
         return jax.tree.map(lambda a: a[:count], out), self.device_ids()[:count]
 
-    def lower(self, members, shared=None):
-        """The lowered program for a batch like `members` (compile-time measurements)."""
+    def _specs(self, members, shared):
         xs = jax.tree.map(lambda a: jax.ShapeDtypeStruct((self.size,) + np.shape(a)[1:], np.asarray(a).dtype,
                                                           sharding=self._batch), members)
         sh = jax.tree.map(lambda a: jax.ShapeDtypeStruct(np.shape(a), np.asarray(a).dtype,
                                                           sharding=self._replicated), shared)
-        return self._fn.lower(xs, sh)
+        return xs, sh
+
+    def output_shapes(self, members, shared=None):
+        """Shapes and dtypes of one member's outputs for a batch like `members`. It traces the
+        batched program itself, so the call that follows reuses that trace."""
+        out = self._fn.eval_shape(*self._specs(members, shared))
+        return jax.tree.map(lambda s: jax.ShapeDtypeStruct(s.shape[1:], s.dtype), out)
+
+    def lower(self, members, shared=None):
+        """The lowered program for a batch like `members` (compile-time measurements)."""
+        return self._fn.lower(*self._specs(members, shared))

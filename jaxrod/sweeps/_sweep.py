@@ -172,8 +172,7 @@ def sweep(fn, points, *, shared=None, out=None, name="sweep", attrs=None, dims=N
     count = next(iter(pts.values())).size
     attrs = dict(attrs or {})
     sm = fn if isinstance(fn, ShardedMap) else ShardedMap(fn, devices=devices, per_device=per_device, mode=mode)
-    member0 = {k: np.asarray(a[0]) for k, a in pts.items()}
-    shapes = jax.eval_shape(sm.fn, member0, shared)
+    shapes = sm.output_shapes({k: a[:1] for k, a in pts.items()}, shared)
     if not isinstance(shapes, dict) or not shapes:
         raise ValueError("fn: must return a non-empty dict of arrays")
     names = list(shapes)
