@@ -23,6 +23,7 @@ from .results import result_name as result_name
 
 # model: what the strip is
 from .model import Clamps as Clamps
+from .model import Contact as Contact
 from .model import Gravity as Gravity
 from .model import make_scene as make_scene
 from .model import Mesh as Mesh

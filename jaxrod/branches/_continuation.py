@@ -284,6 +284,10 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
     - `check_contact`: check every point for self-intersection (`Branch.crossing`; one
       O(N^2) pass per point after the continuation).
 
+    With self-contact (`scene.contact`) a corrected point that passes through itself is
+    rejected like a corrector that fails (the step is halved): a step cannot carry the
+    strip through itself.
+
     **Returns:** a [`jaxrod.Branch`][].
     """
     check_sign("direction", direction)
@@ -332,6 +336,10 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
     def body(c):
         t, m, lam, tau, ds = c["t"], c["m"], c["lam"], c["tau"], c["ds"]
         tn, mn, ln, conv, k = corrector(scene, parameter, (t, m), lam, tau, ds, settings.corrector_steps, tol)
+        if scene.contact is not None:
+            # with self-contact a step must not carry the strip through itself (a penalty
+            # cannot undo a crossing): such a point is rejected and the step halved
+            conv = conv & ~self_intersects(tn, parameter.set(scene, ln), force=mn)
         Kn = Kf(tn, mn, ln)
         nt, nm, nl = _tangent(Kn, F_lam(tn, mn, ln), w * tau[0], tau[2], w)
         nu = kkt.count_below(Kn, jnp.zeros(1, dtype))[0]

@@ -146,10 +146,14 @@ def _land(scene, parameter, t, m, lam, v, direction, up_expected, solver):
     plus = _fh(scene, parameter, t + eps * v, m, lam)
     minus = _fh(scene, parameter, t - eps * v, m, lam)
     pick = jnp.where((plus > minus) == up_expected, 1.0, -1.0)
-    eq = solve_unflagged(sc, t + pick * eps * v, m, Newton(max_steps=200))
+    # with self-contact the steps are capped so that the strip never crosses itself, and a
+    # landing that slides one part along another takes many short steps
+    eq = solve_unflagged(sc, t + pick * eps * v, m, Newton(max_steps=200 if scene.contact is None else 2000))
     return eq.theta, eq.force, _fh(scene, parameter, eq.theta, eq.force, lam + direction * 1e-3), eq
 
 
+CONTACT_STAGES = 6
+"""Stages of a path (see `follow_path`) in a scene with self-contact (2 without)."""
 JUMP_DISTANCE = 0.1  # rad, L2 distance of the angle field; see `follow_path`
 NEAR_FOLD = 0.02
 """|tau_lam| below which a path that does not snap is `fold_unresolved` (see `follow_path`)."""
@@ -359,8 +363,11 @@ def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, cont
         alt = run_if(need_alt, up_start, arrays(down_eq), (scene,) + prev)  # not lax.cond: see `run_if`
         start = jax.tree.map(lambda u, d, a: jnp.where(direction < 0, u, jnp.where(has_down, d, a)),
                              arrays(up_eq), arrays(down_eq), alt)
+        # with self-contact, legs pressed together mirror-symmetrically break the symmetry at
+        # branch points of their own (supercritical: more stages before the snap)
+        stages = 2 if scene.contact is None else CONTACT_STAGES
         path = follow_path(scene, eqx.combine(start, static), direction, parameter, settings, bound, bisections, tol,
-                     continue_after_snap=continue_after_snap, substituted=need_alt)
+                           stages=stages, continue_after_snap=continue_after_snap, substituted=need_alt)
         br = jax.tree.map(lambda x: x[0], path.branch)  # first stage
         last = br.count - 1
         nxt = (br.lam[last], br.theta[last], br.force[last], path.snaps, path.alpha_c, path.theta_after,

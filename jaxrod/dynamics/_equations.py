@@ -5,7 +5,9 @@ of fixed length $h_i$ and tangent angle $\theta_i$, node positions
 $\mathbf x_k=\sum_{i\le k}h_i\mathbf t_i$, $\mathbf t_i=(\cos\theta_i,\sin\theta_i)$,
 $\mathbf n_i=(-\sin\theta_i,\cos\theta_i)$. The potential energy is the very function
 the statics minimize, `jaxrod.energy.bending.bending_energy` (clamps as ghost segments,
-$\theta_0=\alpha_L(t)$, $\theta_{N+1}=-\alpha_R(t)$), plus gravity $g\sum_k m_k y_k$.
+$\theta_0=\alpha_L(t)$, $\theta_{N+1}=-\alpha_R(t)$), plus gravity $g\sum_k m_k y_k$ and, with
+self-contact, the contact energy $E_c(\mathbf x)$ of `jaxrod.energy.contact` (its forces
+$-\partial E_c/\partial\mathbf x_k$ act on the nodes; the end nodes are held).
 Mass: the lumped node masses $m_k=\lambda\,(h_k+h_{k+1})/2$ of `discretize` (the end
 nodes are held by the clamps). Kinetic energy $E_k=\tfrac12\sum_k m_k|\dot{\mathbf x}_k|^2$.
 
@@ -43,6 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..energy.bending import bending_energy, turning_angles
+from ..energy.contact import contact_energy, contact_energy_nodes
 from ..energy.geometry import discretize
 from ..linalg.batched import tridiagonal_solve
 from .._misc import check_bool, check_int, check_number, check_param, check_sign, is_concrete
@@ -169,8 +172,10 @@ def safe_norm(v):
 
 
 def potential_energy(theta, scene, d):
-    """$E_b$ (the statics' function) plus gravity on the free nodes."""
+    """$E_b$ (the statics' function) plus gravity on the free nodes and the contact energy."""
     e = bending_energy(theta, scene, d)
+    if scene.contact is not None:
+        e = e + contact_energy(theta, scene, d)
     if scene.gravity is not None:
         x = jnp.cumsum(d.h * jnp.sin(theta))
         e = e + scene.gravity.g * jnp.sum(d.node_mass[1:-1] * x[:-1])
@@ -203,12 +208,13 @@ def link_pairs(p):
     return jnp.pad(p, ((1, 0), (0, 0))) - jnp.pad(p, ((0, 1), (0, 0)))
 
 
-def applied_forces(t, theta, omega, nn, v, scene, protocol, dissipation, d):
+def applied_forces(t, theta, omega, nn, v, scene, protocol, dissipation, d, x=None):
     r"""The applied node forces $\mathbf f_k$ (N+1, 2) of the module docstring (bending pairs
     $\pm(Q_i/h_i)\mathbf n_i$, hinge viscosity, gravity, damping, drag; no tensions), given the
     link normals `nn` (N, 2) and the node velocities `v` (N+1, 2) that the damping and drag
-    act on. Returns `(f, d, (gL, gR, rL, rR))`, `d` with the clamp angles at time t,
-    `gL = dE_b/dalpha_L` etc."""
+    act on, and with self-contact the contact forces $-\partial E_c/\partial\mathbf x_k$ at the
+    node positions `x` (N+1, 2). Returns `(f, d, (gL, gR, rL, rR))`, `d` with the clamp
+    angles at time t, `gL = dE_b/dalpha_L` etc."""
     aL, aR, rL, rR = protocol.angles(t)
     d = d._replace(theta_left=jnp.asarray(aL, theta.dtype), theta_right=-jnp.asarray(aR, theta.dtype))
     gE, gL, gR = _bending_grads(theta, d.theta_left, -d.theta_right, scene, d)
@@ -227,6 +233,8 @@ def applied_forces(t, theta, omega, nn, v, scene, protocol, dissipation, d):
     f = f - dissipation.damping * m[:, None] * v
     speed = safe_norm(v)
     f = f - dissipation.drag * (m / lam)[:, None] * speed[:, None] * v
+    if scene.contact is not None:
+        f = f - jax.grad(contact_energy_nodes)(x, scene, d)
     return f, d, (gL, gR, rL, rR)
 
 
@@ -236,7 +244,7 @@ def node_forces(t, theta, omega, scene, protocol, dissipation, d):
     (`kinematics`), the normals $\mathbf n_i=(-\sin\theta_i,\cos\theta_i)$."""
     x, v = kinematics(theta, omega, d)
     nn = jnp.stack([-jnp.sin(theta), jnp.cos(theta)], -1)
-    f, d, g = applied_forces(t, theta, omega, nn, v, scene, protocol, dissipation, d)
+    f, d, g = applied_forces(t, theta, omega, nn, v, scene, protocol, dissipation, d, x)
     return f, x, v, d, g
 
 

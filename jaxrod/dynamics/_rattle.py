@@ -70,7 +70,7 @@ def rattle_forces(t, theta, omega, x, v, args):
     scene, protocol, dissipation, _, d = args
     dx = jnp.diff(x, axis=0)
     nn = jnp.stack([-dx[:, 1], dx[:, 0]], -1) / d.h[:, None]
-    f, _, (gL, gR, rL, rR) = applied_forces(t, theta, omega, nn, v, scene, protocol, dissipation, d)
+    f, _, (gL, gR, rL, rR) = applied_forces(t, theta, omega, nn, v, scene, protocol, dissipation, d, x)
     return f, gL * rL + gR * rR
 
 

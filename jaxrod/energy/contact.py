@@ -54,7 +54,6 @@ import numpy as np
 
 from .._misc import run_if
 from .geometry import discretize
-from .lagrangian import positions
 
 TOL = 1e-9
 """Default tolerance of `self_intersects`, relative to the strip length."""
@@ -119,11 +118,126 @@ def segment_distances(x, min_separation: int = 2):
     return c, jnp.any(crosses, -1)
 
 
+def contact_pairs(scene):
+    """Node and segment indices `(p, j)` (NumPy, fixed at trace time) of the pairs that
+    interact under `scene.contact`: segment j lies at least `exclusion` * L of arclength
+    away from node p on either side."""
+    f = np.asarray(scene.mesh.fractions)
+    ex = scene.contact.exclusion
+    p = np.arange(f.size)[:, None]
+    j = np.arange(f.size - 1)[None, :]
+    keep = (f[j] - f[p] >= ex - 1e-12) | (f[p] - f[j + 1] >= ex - 1e-12)
+    p, j = np.nonzero(keep)
+    return p, j
+
+
+def penalty(d, thickness, stiffness):
+    r"""$\varphi(d)=\frac{k\delta}3(1-d/\delta)^3$ for $d<\delta$, else 0 (see `jaxrod.Contact`)."""
+    u = jnp.maximum(1.0 - d / thickness, 0.0)
+    return stiffness * thickness / 3.0 * u**3
+
+
+def _pair_energy(z, thickness, stiffness):
+    """phi of the distance from node z[0:2] to the segment [z[2:4], z[4:6]]."""
+    return penalty(_point_segment(z[0:2], z[2:4], z[4:6]), thickness, stiffness)
+
+
+def _voronoi(d):
+    h = d.h
+    return jnp.concatenate([h[:1] * 0.5, 0.5 * (h[1:] + h[:-1]), h[-1:] * 0.5])
+
+
+def _pair_coordinates(x, p, j):
+    return jnp.concatenate([x[p], x[j], x[j + 1]], -1)  # (P, 6)
+
+
+def contact_energy_nodes(x, scene, d=None):
+    r"""$E_c$ of node positions `x` (N+1, 2) under `scene.contact` (0 without contact)."""
+    if scene.contact is None:
+        return jnp.zeros((), x.dtype)
+    if d is None:
+        d = discretize(scene)
+    p, j = contact_pairs(scene)
+    if p.size == 0:
+        return jnp.zeros((), x.dtype)
+    c = scene.contact
+    e = jax.vmap(_pair_energy, (0, None, None))(_pair_coordinates(x, p, j), c.thickness, c.stiffness)
+    return jnp.sum(_voronoi(d)[p] * e)
+
+
+def inextensible_nodes(theta, d):
+    r"""$\mathbf x_k=\sum_{i<k}h_i\mathbf t_i$, shape (N+1, 2), node 0 at the origin."""
+    e = d.h[:, None] * jnp.stack([jnp.cos(theta), jnp.sin(theta)], -1)
+    return jnp.concatenate([jnp.zeros((1, 2), e.dtype), jnp.cumsum(e, 0)])
+
+
+def contact_energy(theta, scene, d=None):
+    r"""$E_c$ of the angles `theta` (N,) (inextensible positions; 0 without contact)."""
+    if scene.contact is None:
+        return jnp.zeros((), theta.dtype)
+    if d is None:
+        d = discretize(scene)
+    return contact_energy_nodes(inextensible_nodes(theta, d), scene, d)
+
+
+def step_bound(theta, step, scene, d=None, margin=0.9):
+    r"""The largest $\tau\in(0,1]$ such that no contact pair (`contact_pairs`) can meet
+    along the path $\theta+\tau'\,$`step`, $0\le\tau'\le\tau$ (a conservative continuous
+    collision check).
+
+    Turning segment $i$ by $\Delta\theta_i$ moves its end relative to its start by at most
+    the arc $h_i|\Delta\theta_i|$, so two points of the strip move relative to each other
+    by at most $\sum_i h_i|\Delta\theta_i|$ over the segments between them. With prefix
+    sums $P_k=\sum_{i<k}h_i|\mathrm{step}_i|$, node $p$ and segment $j$ close by at most
+    $\tau B_{pj}$, $B_{pj}=\max(|P_p-P_j|,|P_p-P_{j+1}|)$, and
+    $\tau=\min(1,\min_{pj}\texttt{margin}\,d_{pj}/B_{pj})$ over the pairs not already
+    touching ($d_{pj}>0$)."""
+    if d is None:
+        d = discretize(scene)
+    p, j = contact_pairs(scene)
+    if p.size == 0:
+        return jnp.ones((), theta.dtype)
+    x = inextensible_nodes(theta, d)
+    dist = jax.vmap(lambda z: _point_segment(z[0:2], z[2:4], z[4:6]))(_pair_coordinates(x, p, j))
+    P = jnp.concatenate([jnp.zeros(1, theta.dtype), jnp.cumsum(d.h * jnp.abs(step))])
+    B = jnp.maximum(jnp.abs(P[p] - P[j]), jnp.abs(P[p] - P[j + 1]))
+    ok = (dist > 0) & (B > 0)
+    tau = jnp.min(jnp.where(ok, margin * dist / jnp.where(ok, B, 1.0), jnp.inf))
+    return jnp.clip(jnp.where(jnp.isfinite(tau), tau, 1.0), 0.0, 1.0)
+
+
+def contact_hessian(theta, scene, d=None):
+    r"""$\partial^2E_c/\partial\theta^2$, dense (N, N), by the suffix sums of the module
+    docstring from the pairs' Cartesian Hessians."""
+    if d is None:
+        d = discretize(scene)
+    N = theta.shape[0]
+    x = inextensible_nodes(theta, d)
+    p, j = contact_pairs(scene)
+    c = scene.contact
+    w = _voronoi(d)[p]
+    z = _pair_coordinates(x, p, j)
+    Hp = jax.vmap(jax.hessian(_pair_energy), (0, None, None))(z, c.thickness, c.stiffness) * w[:, None, None]
+    nodes = np.stack([p, j, j + 1], -1)  # (P, 3)
+    idx = (2 * nodes[:, :, None] + np.arange(2)).reshape(-1, 6)  # node-coordinate indices
+    Hx = jnp.zeros((2 * (N + 1), 2 * (N + 1)), x.dtype).at[idx[:, :, None], idx[:, None, :]].add(Hp)
+    Hx = Hx.reshape(N + 1, 2, N + 1, 2)
+    S = jnp.flip(jnp.cumsum(jnp.flip(Hx, (0, 2)), 0), (0, 2))
+    S = jnp.flip(jnp.cumsum(jnp.flip(S, 2), 2), 2)[1:, :, 1:, :]  # (N, 2, N, 2)
+    gx = jax.grad(contact_energy_nodes)(x, scene, d)
+    G = jnp.flip(jnp.cumsum(jnp.flip(gx, 0), 0), 0)[1:]  # (N, 2)
+    hn = d.h[:, None] * jnp.stack([-jnp.sin(theta), jnp.cos(theta)], -1)
+    ht = d.h[:, None] * jnp.stack([jnp.cos(theta), jnp.sin(theta)], -1)
+    H = jnp.einsum("ia,iajb,jb->ij", hn, S, hn)
+    return H - jnp.diag(jnp.sum(ht * G, -1))
+
+
 def _nodes(theta, scene, force):
+    from .lagrangian import positions  # the Lagrangian imports this module
+
     d = discretize(scene)
     if force is None:
-        e = d.h[:, None] * jnp.stack([jnp.cos(theta), jnp.sin(theta)], -1)
-        return jnp.concatenate([jnp.zeros((1, 2), e.dtype), jnp.cumsum(e, 0)])
+        return inextensible_nodes(theta, d)
     return positions(theta, force, scene, d)
 
 

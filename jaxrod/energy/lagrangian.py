@@ -16,7 +16,8 @@ $\varepsilon$ enters quadratically and is eliminated exactly, $\varepsilon_i=-a_
 $$\tilde{\mathcal L}(\theta,\mu) = E_b + \sum_i h_i a_i - \sum_i \frac{h_i a_i^2}{2K} + \mu_x G .$$
 
 Its Hessian is tridiagonal in $\theta$, bordered by two columns in $\mu$; the inextensible
-strip is $K=\infty$ (the last sum dropped).
+strip is $K=\infty$ (the last sum dropped). A scene with self-contact adds the contact energy
+$E_c(\theta)$ of `jaxrod.energy.contact` (inextensible positions), whose Hessian is dense.
 
 The gradient and Hessian are written out (`lagrangian_gradient`, `hessian_blocks`) rather
 than taken by autodiff of $\tilde{\mathcal L}$: with $c_i=\cos\theta_i$, $s_i=\sin\theta_i$,
@@ -42,6 +43,7 @@ import jax
 import jax.numpy as jnp
 
 from .bending import bending_energy, turning_angles
+from .contact import contact_energy
 from .geometry import discretize
 
 
@@ -88,7 +90,10 @@ def lagrangian(theta, mu, scene, d=None):
         d = discretize(scene)
     W, inv_K = _segment_data(scene, d)
     seg = jax.vmap(_segment_terms, in_axes=(0, None, 0, 0, None))(theta, mu, d.h, W, inv_K)
-    return bending_energy(theta, scene, d) + jnp.sum(seg) + mu[0] * scene.clamps.gap
+    e = bending_energy(theta, scene, d) + jnp.sum(seg) + mu[0] * scene.clamps.gap
+    if scene.contact is not None:
+        e = e + contact_energy(theta, scene, d)
+    return e
 
 
 def _segment_derivatives(theta, mu, d, W, inv_K):
@@ -108,6 +113,8 @@ def lagrangian_gradient(theta, mu, scene, d=None):
     a, a_t, c, s, hk = _segment_derivatives(theta, mu, d, W, inv_K)
     q = scene.strip.bending_stiffness * (turning_angles(theta, d) - d.phi0) / d.ell
     g_theta = q[:-1] - q[1:] + hk * a_t
+    if scene.contact is not None:
+        g_theta = g_theta + jax.grad(contact_energy)(theta, scene, d)
     g_mu = jnp.stack([scene.clamps.gap - jnp.sum(hk * c), -jnp.sum(hk * s)])
     return g_theta, g_mu
 
@@ -116,7 +123,8 @@ def hessian_blocks(theta, mu, scene, d=None):
     r"""The Hessian of $\tilde{\mathcal L}$ as (lower, diag, upper, border, corner),
     assembled per stencil: the bending part is the constant tridiagonal matrix
     $B\,D^\top \mathrm{diag}(1/\ell) D$, the segment terms contribute the $3\times3$
-    Hessians in $(\theta_i,\mu)$ of the module docstring."""
+    Hessians in $(\theta_i,\mu)$ of the module docstring. Without the contact energy
+    (whose dense Hessian `jaxrod.linalg.kkt.structured` adds)."""
     if d is None:
         d = discretize(scene)
     B = scene.strip.bending_stiffness
@@ -161,4 +169,5 @@ def energies(theta, mu, scene, d=None):
         out["gravity"] = scene.gravity.g * jnp.sum(d.node_mass[1:-1] * y[1:-1])
     else:
         out["gravity"] = jnp.zeros((), theta.dtype)
+    out["contact"] = contact_energy(theta, scene, d)
     return out

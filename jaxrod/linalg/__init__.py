@@ -9,4 +9,5 @@ Layer: above energy; below statics.
 
 from . import batched as batched
 from . import kkt as kkt
+from .kkt import BorderedDense as BorderedDense
 from .kkt import BorderedTridiagonal as BorderedTridiagonal

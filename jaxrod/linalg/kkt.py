@@ -19,6 +19,16 @@ C\in\mathbb R^{2\times 2}\ (C=0\ \text{when inextensible}).$$
   from the $LDL^\top$ pivots of the tridiagonal block (a Sturm count) and the $-2$ is the
   two negative directions the end constraints (or the stretching compliance) always
   contribute. $\nu(0)=0$ is strict stability; bisection on $\nu$ gives any eigenvalue.
+
+**With self-contact** (`scene.contact`) the $\theta\theta$ block is $T+H_c$, $H_c$ the dense
+contact Hessian (`jaxrod.energy.contact.contact_hessian`): [`structured`][] returns a
+[`BorderedDense`][] and every function here dispatches on it: solves are one dense LU of
+the $(N+2)\times(N+2)$ matrix, $\nu(\sigma)$ the count of its negative eigenvalues minus 2
+(one symmetric eigendecomposition), and the smallest constrained eigenvalues come from one
+eigendecomposition of the reduced matrix: $\Pi A\Pi+c\,(I-\Pi)$ with
+$\Pi=I-P(P^\top P)^{-1}P^\top$ and $c$ above $A$'s spectrum when $C=0$, else
+$A-PC^{-1}P^\top$. $O(N^3)$ instead of $O(N)$: at N = 100 a dense factorization costs
+about as much as the contact Hessian's assembly, see `benchmarks/bench_contact.py`.
 """
 
 from __future__ import annotations
@@ -30,7 +40,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array
 
-from .batched import solve2 as _solve2, tridiagonal_solve
+from .batched import eigh as _eigh, solve as _dense_solve, solve2 as _solve2, tridiagonal_solve
 
 
 class BorderedTridiagonal(NamedTuple):
@@ -52,6 +62,34 @@ class BorderedTridiagonal(NamedTuple):
         bot = jnp.concatenate([self.border.T, self.corner], axis=1)
         del N
         return jnp.concatenate([top, bot], axis=0)
+
+
+class BorderedDense(NamedTuple):
+    """The bordered Hessian with a dense theta-theta block (self-contact), fields as
+    `BorderedTridiagonal` with `block` (N, N) in place of the three diagonals."""
+
+    block: Array  # (N, N)
+    border: Array  # (N, 2)
+    corner: Array  # (2, 2)
+
+    @property
+    def n(self):
+        return self.block.shape[-1]
+
+    @property
+    def diag(self):
+        return jnp.diagonal(self.block, axis1=-2, axis2=-1)
+
+    def dense(self):
+        top = jnp.concatenate([self.block, self.border], axis=1)
+        bot = jnp.concatenate([self.border.T, self.corner], axis=1)
+        return jnp.concatenate([top, bot], axis=0)
+
+
+def _shifted(K: BorderedDense, shift):
+    N = K.n
+    dtype = K.block.dtype
+    return K.dense() - shift * jnp.diag(jnp.concatenate([jnp.ones(N, dtype), jnp.zeros(2, dtype)]))
 
 
 def assemble(grad_fn, theta, mu) -> BorderedTridiagonal:
@@ -82,10 +120,17 @@ def structured(theta, mu, scene, d=None) -> BorderedTridiagonal:
     `jaxrod.energy.lagrangian.hessian_blocks`); equal to `assemble` of its gradient."""
     from ..energy.lagrangian import hessian_blocks
 
-    return BorderedTridiagonal(*hessian_blocks(theta, mu, scene, d))
+    K = BorderedTridiagonal(*hessian_blocks(theta, mu, scene, d))
+    if scene.contact is None:
+        return K
+    from ..energy.contact import contact_hessian
+
+    return BorderedDense(K.dense()[:-2, :-2] + contact_hessian(theta, scene, d), K.border, K.corner)
 
 
 def matvec(K: BorderedTridiagonal, vt, vm):
+    if isinstance(K, BorderedDense):
+        return K.block @ vt + K.border @ vm, K.border.T @ vt + K.corner @ vm
     Tv = K.diag * vt + K.upper * jnp.roll(vt, -1) + K.lower * jnp.roll(vt, 1)
     return Tv + K.border @ vm, K.border.T @ vt + K.corner @ vm
 
@@ -96,6 +141,9 @@ def _tri(K, shift, rhs):
 
 def solve(K: BorderedTridiagonal, rt, rm, shift=0.0):
     r"""Solve $(\mathsf K-\sigma\,\mathrm{diag}(I,0))\,(a,b) = (r_\theta, r_\mu)$ in $O(N)$."""
+    if isinstance(K, BorderedDense):
+        x = _dense_solve(_shifted(K, shift), jnp.concatenate([rt, rm]))
+        return x[:-2], x[-2:]
     X = _tri(K, shift, jnp.concatenate([rt[:, None], K.border], axis=1))
     S = K.corner - K.border.T @ X[:, 1:]
     b = _solve2(S, rm - K.border.T @ X[:, 0])
@@ -130,6 +178,8 @@ def _sym2_negatives(S):
 def count_below(K: BorderedTridiagonal, shifts):
     r"""$\nu(\sigma)$: number of constrained stiffness eigenvalues below each shift."""
     shifts = jnp.atleast_1d(shifts)
+    if isinstance(K, BorderedDense):
+        return jax.vmap(lambda sig: jnp.sum(_eigh(_shifted(K, sig))[0] < 0).astype(jnp.int32) - 2)(shifts)
     neg_t = _pivot_negatives(K, shifts)
 
     def schur(sig):
@@ -153,6 +203,8 @@ def smallest_eigenvalues(K: BorderedTridiagonal, k: int = 4, iters: int | None =
     vectorized Sturm count: $O(kN)$ work per step, `iters` steps (default: enough to reach
     machine precision).
     """
+    if isinstance(K, BorderedDense):
+        return _dense_smallest(K)[:k]
     lo0, hi0 = gershgorin(K)
     width = hi0 - lo0
     dtype = K.diag.dtype
@@ -170,6 +222,21 @@ def smallest_eigenvalues(K: BorderedTridiagonal, k: int = 4, iters: int | None =
 
     lo, hi = lax.fori_loop(0, iters, body, (lo, hi))
     return 0.5 * (lo + hi)
+
+
+def _dense_smallest(K: BorderedDense):
+    """Every constrained eigenvalue (ascending) of a `BorderedDense` (module docstring)."""
+    A, P, C = K.block, K.border, K.corner
+    N = K.n
+    dtype = A.dtype
+    eye = jnp.eye(N, dtype=dtype)
+    proj = P @ _solve2(P.T @ P, P.T)  # P (P^T P)^{-1} P^T
+    Pi = eye - proj
+    c = jnp.max(jnp.sum(jnp.abs(A), 1)) + 1.0
+    rigid = jnp.all(C == 0)
+    Cs = jnp.where(rigid, jnp.eye(2, dtype=dtype), C)
+    M = jnp.where(rigid, Pi @ A @ Pi + c * proj, A - P @ _solve2(Cs, P.T))
+    return _eigh(M)[0]  # rigid: the two eigenvalues near c (the constraint directions) come last
 
 
 def modes(K: BorderedTridiagonal, eigenvalues, iterations: int = 3):

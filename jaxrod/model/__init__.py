@@ -5,6 +5,7 @@ The bottom layer: it imports nothing else from jaxrod.
 """
 
 from ._scene import Clamps as Clamps
+from ._scene import Contact as Contact
 from ._scene import Gravity as Gravity
 from ._scene import make_scene as make_scene
 from ._scene import Mesh as Mesh

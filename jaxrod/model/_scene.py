@@ -194,6 +194,51 @@ class Gravity(eqx.Module):
         self.g = _leaf(g)
 
 
+class Contact(eqx.Module):
+    r"""Self-contact of the strip: a smooth penalty between parts of the strip that are not
+    neighbours, active where they come within the contact thickness $\delta$ of each other.
+
+    Node $p$ (Voronoi length $w_p$) and segment $j$ at distance $d_{pj}$ (closest point of
+    the segment) interact when segment $j$ lies entirely more than `exclusion` $\cdot L$ of
+    arclength away from node $p$; the energy is
+
+    $$E_c=\sum_p w_p\sum_j \varphi(d_{pj}),\qquad
+    \varphi(d)=\frac{k\delta}{3}\Big(1-\frac d\delta\Big)^3\ (d<\delta),\quad 0\ (d\ge\delta),$$
+
+    so $\varphi,\varphi',\varphi''$ all vanish at $d=\delta$: a contact that opens or
+    closes is a smooth event for Newton and continuation, not a kink. The force per unit
+    length pressing a node against a segment is $k(1-d/\delta)^2$: the load $f$ per unit
+    length sinks it to $d=\delta(1-\sqrt{f/k})$, so $k$ (units $B/L^3$) must exceed the
+    line loads the scene produces (bending loads of these strips are $10$-$10^3\,B/L^3$).
+
+    - `thickness` $\delta$ (units of L; default 0.01 L): the distance at which the
+      centrelines touch, i.e. the strip's thickness $t$ when physical units are used
+      (PET strips of the paper: $t/L\approx 4\cdot10^{-4}$-$1.3\cdot10^{-3}$). A
+      thickness below the mesh size $h$ is allowed (the node-to-segment distance cannot
+      tunnel) but the penalty's stiffness $2k/\delta$ then sets the dynamics' step.
+    - `stiffness` $k$ (default $10^5\,B/L^3$): a node pressed with $f=10^3\,B/L^3$ sinks to
+      $0.9\,\delta$.
+    - `exclusion` (static, fraction of L; default 0.1): parts of the strip closer than this
+      in arclength never interact (the crease of a tight fold brings its own facets within
+      $\delta$ of each other by design).
+
+    Contact is modelled only in scenes that carry it (`Scene(..., contact=Contact())`); the
+    Hessian is then dense (see `jaxrod.linalg.kkt`). The contact geometry uses the
+    inextensible node positions."""
+
+    thickness: float = 0.01
+    stiffness: float = 1.0e5
+    exclusion: float = eqx.field(static=True, default=0.1)
+
+    def __init__(self, thickness=0.01, stiffness=1.0e5, exclusion=0.1):
+        check_param("thickness", thickness, lo=0.0)
+        check_param("stiffness", stiffness, lo=0.0)
+        check_param("exclusion", exclusion, lo=0.0, hi=1.0)
+        self.thickness = _leaf(thickness)
+        self.stiffness = _leaf(stiffness)
+        self.exclusion = float(exclusion)
+
+
 class Scene(eqx.Module):
     r"""What to model: a strip, its clamps, a mesh, and the optional energy terms.
 
@@ -206,13 +251,17 @@ class Scene(eqx.Module):
     mesh: Mesh = eqx.field(static=True)
     stretching: Stretching | None = None
     gravity: Gravity | None = None
+    contact: Contact | None = None
 
-    def __init__(self, strip, clamps, mesh=None, stretching=None, gravity=None):
+    def __init__(self, strip, clamps, mesh=None, stretching=None, gravity=None, contact=None):
         self.strip = strip
         self.clamps = clamps
         self.mesh = Mesh() if mesh is None else mesh
         self.stretching = stretching
         self.gravity = gravity
+        if contact is not None and not isinstance(contact, Contact):
+            raise ValueError(f"contact must be a jaxrod.Contact or None, got {type(contact).__name__}")
+        self.contact = contact
         if is_concrete_pair(clamps.gap, strip.length):
             g, L = np.asarray(clamps.gap, float), np.asarray(strip.length, float)
             if np.any(g >= L):
@@ -226,7 +275,7 @@ def is_concrete_pair(*xs) -> bool:
 
 
 def make_scene(psi0_deg=60.0, gap=0.5, alpha_deg=0.0, *, alpha_right_deg=None, s0=0.02, n=100,
-               refine=1.0, stretching=None, gravity=None) -> Scene:
+               refine=1.0, stretching=None, gravity=None, contact=None) -> Scene:
     """Convenience constructor in nondimensional units with angles in degrees.
 
     `alpha_deg` rotates the left clamp, and the right clamp too unless
@@ -244,4 +293,5 @@ def make_scene(psi0_deg=60.0, gap=0.5, alpha_deg=0.0, *, alpha_right_deg=None, s
         Mesh(n, refine),
         stretching=stretching,
         gravity=gravity,
+        contact=contact,
     )

@@ -16,6 +16,10 @@ minimum from a rough guess, not a saddle:
 
 With `minimize=False` it is plain Newton (for following unstable branches).
 
+Every step is capped at 0.5 rad in any angle; with self-contact (`scene.contact`) also by
+`jaxrod.energy.contact.step_bound`, so that no step carries two parts of the strip through
+each other (a penalty could not undo a crossing once made). The Hessian is then dense.
+
 Derivatives of the solution with respect to any float leaf of the scene are by the
 implicit function theorem (one extra structured solve, `lax.custom_linear_solve`),
 never by unrolling the iterations.
@@ -32,6 +36,7 @@ from jax import lax
 
 from ..linalg import kkt
 from ..energy.geometry import discretize, scene_dtype
+from ..energy.contact import step_bound
 from ..energy.lagrangian import lagrangian, lagrangian_gradient
 from .._misc import check_bool, check_int, check_number, run_if
 from ..results import RESULTS
@@ -144,6 +149,9 @@ def _newton(scene, theta0, mu0, solver: Newton):
             # cap the angle update at MAX_ANGLE_STEP rad (inactive near convergence)
             cap = jnp.minimum(1.0, MAX_ANGLE_STEP / jnp.maximum(jnp.max(jnp.abs(p)), 1e-300))
             cap = jnp.where(jnp.isfinite(cap), cap, 1.0)
+            if scene.contact is not None:
+                # with self-contact, no step may carry two parts of the strip through each other
+                cap = cap * step_bound(t, cap * p, scene, d)
             p, q = cap * p, cap * q
             if solver.minimize:
                 # The penalty rho is raised for this iteration where the Newton direction

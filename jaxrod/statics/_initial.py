@@ -11,6 +11,16 @@ previous step (no jump to another branch). The first valid path wins; if none is
 result is `state_not_found` (for example the down state of a tight fold at a large gap,
 which does not exist at $\alpha=0$).
 
+With self-contact (`scene.contact`) the flat start is built at the gap
+$\max(G, 0.35L)$, where no buckled state touches itself, and the gap closes to $G$ along
+the homotopy together with the other parameters, so contact develops step by step (a start
+built at a small gap would already pass through itself, and a penalty cannot undo that).
+Pressed together, the two legs of a mirror-symmetric state would have to pass through each
+other: the symmetric contact state is a saddle, and each homotopy step starts from its
+predecessor turned by `CONTACT_SEED` rad (a mirror-asymmetric perturbation) so that Newton
+minimization leaves it for the stable asymmetric state (in which the right leg lies above
+the left one); where the symmetric state is stable, the seed relaxes away.
+
 The flat buckled start is $\theta_i=\pm A\sin(2\pi m_i/L)$ with $A$ chosen so that
 $\sum_i h_i\cos\theta_i=G$ exactly; Newton then relaxes it onto the elastica.
 """
@@ -76,6 +86,24 @@ def _deformed(scene, uc, ua):
     return scene
 
 
+CONTACT_START_GAP = 0.35
+"""With self-contact, the homotopy starts at the gap max(G, 0.35 L) (module docstring)."""
+
+
+CONTACT_SEED = 1e-3
+"""With self-contact, the mirror-asymmetric seed of every homotopy step (module docstring)."""
+
+
+def _with_gap(target, u):
+    """`target` with the gap at homotopy time u: the target's own without contact, else
+    from max(G, CONTACT_START_GAP L) at u = 0 to G at u = 1."""
+    if target.contact is None:
+        return target
+    G = target.clamps.gap
+    g0 = jnp.maximum(G, CONTACT_START_GAP * target.strip.length)
+    return eqx.tree_at(lambda s: s.clamps.gap, target, g0 + u * (G - g0))
+
+
 def _fold_height(theta, mu, scene):
     return positions(theta, mu, scene)[scene.mesh.n // 2, 1]
 
@@ -110,7 +138,7 @@ def _flat_start(target, sgn, solver):
     """The flat strip buckled to the side `sgn` at the target's gap, relaxed: `(equilibrium,
     valid)`; shared by the three deformation paths."""
     dtype = scene_dtype(target)
-    s0 = _deformed(target, jnp.zeros((), dtype), jnp.zeros((), dtype))
+    s0 = _deformed(_with_gap(target, jnp.zeros((), dtype)), jnp.zeros((), dtype), jnp.zeros((), dtype))
     eq0 = solve_unflagged(s0, sgn * buckled_guess(s0, True), None, solver)
     ok0 = eq0.converged & eq0.stable & (sgn * _fold_height(eq0.theta, eq0.force, s0) > 0)
     return eq0, ok0
@@ -122,8 +150,9 @@ def _run_path(target, sgn, kind, eq0, ok0, us, solver):
     def step(carry, u):
         t, m, ok = carry
         uc, ua = _path_params(kind, u)
-        sc = _deformed(target, uc, ua)
-        eq = solve_unflagged(sc, t, m, solver)
+        sc = _deformed(_with_gap(target, u), uc, ua)
+        seed = 0.0 if target.contact is None else CONTACT_SEED
+        eq = solve_unflagged(sc, t + seed, m, solver)
         return (eq.theta, eq.force, ok & still_tracked(eq, sgn, t, sc)), None
 
     (t, m, ok), _ = lax.scan(step, (eq0.theta, eq0.force, ok0), us)

@@ -41,9 +41,9 @@ def fold_height(eq):
 
 
 def energies(eq):
-    """Dict with `bending`, `stretching`, `gravity` energies and their `total`."""
+    """Dict with `bending`, `stretching`, `gravity`, `contact` energies and their `total`."""
     e = _energies(eq.theta, eq.force, eq.scene)
-    e["total"] = e["bending"] + e["stretching"] + e["gravity"]
+    e["total"] = e["bending"] + e["stretching"] + e["gravity"] + e["contact"]
     return e
 
 
