@@ -208,7 +208,11 @@ def step_bound(theta, step, scene, d=None, margin=0.9):
 
 def contact_hessian(theta, scene, d=None):
     r"""$\partial^2E_c/\partial\theta^2$, dense (N, N), by the suffix sums of the module
-    docstring from the pairs' Cartesian Hessians."""
+    docstring from the pairs' Cartesian Hessians.
+
+    Only pairs closer than the thickness contribute: the $K=\max(64,2N)$ closest pairs are
+    assembled (`lax.top_k` on the distances), and all of them in the rare state with more
+    than $K$ pairs in contact."""
     if d is None:
         d = discretize(scene)
     N = theta.shape[0]
@@ -217,10 +221,24 @@ def contact_hessian(theta, scene, d=None):
     c = scene.contact
     w = _voronoi(d)[p]
     z = _pair_coordinates(x, p, j)
-    Hp = jax.vmap(jax.hessian(_pair_energy), (0, None, None))(z, c.thickness, c.stiffness) * w[:, None, None]
+    hess = jax.vmap(jax.hessian(_pair_energy), (0, None, None))
     nodes = np.stack([p, j, j + 1], -1)  # (P, 3)
     idx = (2 * nodes[:, :, None] + np.arange(2)).reshape(-1, 6)  # node-coordinate indices
-    Hx = jnp.zeros((2 * (N + 1), 2 * (N + 1)), x.dtype).at[idx[:, :, None], idx[:, None, :]].add(Hp)
+    idx = jnp.asarray(idx)
+
+    def assemble(sel):
+        Hp = hess(z[sel], c.thickness, c.stiffness) * w[sel][:, None, None]
+        ii = idx[sel]
+        return jnp.zeros((2 * (N + 1), 2 * (N + 1)), x.dtype).at[ii[:, :, None], ii[:, None, :]].add(Hp)
+
+    K = min(max(64, 2 * N), p.size)
+    if K < p.size:
+        dist = jax.vmap(lambda q: _point_segment(q[0:2], q[2:4], q[4:6]))(z)
+        near = jax.lax.top_k(-dist, K)[1]
+        many = jnp.sum(dist < c.thickness) > K
+        Hx = jax.lax.cond(many, lambda: assemble(jnp.arange(p.size)), lambda: assemble(near))
+    else:
+        Hx = assemble(jnp.arange(p.size))
     Hx = Hx.reshape(N + 1, 2, N + 1, 2)
     S = jnp.flip(jnp.cumsum(jnp.flip(Hx, (0, 2)), 0), (0, 2))
     S = jnp.flip(jnp.cumsum(jnp.flip(S, 2), 2), 2)[1:, :, 1:, :]  # (N, 2, N, 2)
