@@ -100,7 +100,7 @@ def _second(scene_d, path, direction, settings, bound, bisections, tol):
         ev = kkt.smallest_eigenvalues(K, 3)
         nu_a = b.num_unstable[j - 1]
         v = kkt.modes(K, ev)[:, jnp.clip(nu_a, 0, 2)]
-        asym = (mode_parity(v[:, None])[0] < 0) & _is_mirror_symmetric(t)
+        asym = (mode_parity(v[:, None])[0] < 0) & _is_mirror_symmetric(t, scene)
         kind = jnp.where(fold | ~asym, KIND_FOLD, KIND_BRANCH_POINT).astype(jnp.int32)
         return b.stop, nu_a, t, m, lam, v, kind
 

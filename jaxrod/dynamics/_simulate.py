@@ -169,10 +169,34 @@ RING_COURANT = 0.05
 DEFAULT_SUBSTEPS = 4
 
 
+# With self-contact the step also resolves the contact's own frequency: a node pressed into a
+# segment oscillates at omega_c = sqrt(2 k / (delta lambda)) (the penalty's largest stiffness
+# per unit length over the line density), and the step is at most CONTACT_COURANT / omega_c
+# (energy error ~ (omega_c dt)^2 while in contact).
+CONTACT_COURANT = 0.1
+
+
+def _contact_dt(scene):
+    """The contact's step limit in units of T (1 / omega_c T times CONTACT_COURANT); from the
+    scene's contact leaves where they are concrete, else from `jaxrod.Contact`'s defaults."""
+    from ..model._scene import CONTACT_STIFFNESS, CONTACT_THICKNESS
+
+    c, st = scene.contact, scene.strip
+    try:
+        k, delta = float(c.stiffness), float(c.thickness)
+        L, B = float(st.length), float(st.bending_stiffness)
+    except (TypeError, jax.errors.ConcretizationTypeError):
+        k, delta, L, B = CONTACT_STIFFNESS, CONTACT_THICKNESS, 1.0, 1.0
+    return CONTACT_COURANT / math.sqrt(2.0 * k * L**4 / (delta * B))
+
+
 def _rattle_dt_natural(scene, courant):
-    """RATTLE's largest step in units of T (static: from the mesh fractions)."""
+    """RATTLE's largest step in units of T (static: from the mesh fractions and the contact)."""
     frac_min = float(np.min(np.diff(np.asarray(scene.mesh.fractions))))
-    return min(courant * frac_min**2, DT_CAP)
+    dt = min(courant * frac_min**2, DT_CAP)
+    if scene.contact is not None:
+        dt = min(dt, _contact_dt(scene))
+    return dt
 
 
 def _default_n_fine(scene, solver, dt, t1, courant, substeps=1):
@@ -214,7 +238,8 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     `frame_window` (t_a, t_b) the span of the `n_frames` frames (default (0, t1));
     `courant` (`"rattle"` only, when `dt` is None): the step is the largest
     $\Delta t\le\min($`courant`$\,(h_{\min}/L)^2,\ 2\cdot10^{-4})\,T$, $T=L^2\sqrt{\lambda/B}$
-    (the cap `DT_CAP` matters below N ~ 48 at courant 0.45), with `courant` 0.45 by default when
+    (the cap `DT_CAP` matters below N ~ 48 at courant 0.45; with self-contact also
+    $\le 0.1/\omega_c$, $\omega_c=\sqrt{2k/(\delta\lambda)}$ the contact's frequency), with `courant` 0.45 by default when
     the run stops at the snap and 0.05 (`RING_COURANT`) when it goes on past it
     (`stop_at_snap=False`: the slam and the ringing need the smaller step, see
     `RING_COURANT`); the step is the largest that divides the fine-grid spacing

@@ -194,6 +194,12 @@ class Gravity(eqx.Module):
         self.g = _leaf(g)
 
 
+CONTACT_THICKNESS = 0.01
+"""`Contact`'s default thickness (units of L)."""
+CONTACT_STIFFNESS = 1.0e5
+"""`Contact`'s default penalty stiffness (units of B / L^3)."""
+
+
 class Contact(eqx.Module):
     r"""Self-contact of the strip: a smooth penalty between parts of the strip that are not
     neighbours, active where they come within the contact thickness $\delta$ of each other.
@@ -230,7 +236,7 @@ class Contact(eqx.Module):
     stiffness: float = 1.0e5
     exclusion: float = eqx.field(static=True, default=0.1)
 
-    def __init__(self, thickness=0.01, stiffness=1.0e5, exclusion=0.1):
+    def __init__(self, thickness=CONTACT_THICKNESS, stiffness=CONTACT_STIFFNESS, exclusion=0.1):
         check_param("thickness", thickness, lo=0.0)
         check_param("stiffness", stiffness, lo=0.0)
         check_param("exclusion", exclusion, lo=0.0, hi=1.0)

@@ -1,0 +1,217 @@
+"""Self-contact (`jaxrod.Contact`): the penalty, its derivatives against autodiff and central
+differences, the dense bordered Hessian's linear algebra against dense NumPy, the
+continuous collision bound, equilibria pressed against themselves (never crossing, fuzzed
+over small gaps and clamp angles), unchanged results where the strip stays clear, and the
+energy of an undamped run with contacts."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxrod as jr
+from jaxrod.energy import contact as C
+from jaxrod.energy.lagrangian import lagrangian, lagrangian_gradient
+from jaxrod.linalg import kkt
+from helpers import np_crossings
+
+N = 24
+
+
+def _scene(psi0=180.0, gap=0.1, alpha=0.0, n=N, contact=True, **kw):
+    return jr.make_scene(psi0, gap, alpha, n=n, contact=jr.Contact(**kw) if contact else None)
+
+
+def _angles(seed, n=N, scale=0.7):
+    return jnp.asarray(np.random.default_rng(seed).normal(size=n)) * scale
+
+
+@pytest.fixture(scope="module")
+def pressed():
+    """The flat strip's up state at G/L = 0.1 with contact: its legs pressed together."""
+    return jr.initial_state(_scene(), "up")
+
+
+# ------------------------------------------------------------------ the contact law
+def test_penalty_vanishes_smoothly_at_the_thickness():
+    """phi, phi' and phi'' are continuous and zero at d = delta (a contact opening or closing
+    is smooth for Newton); phi' = -k (1 - d/delta)^2 is the line force."""
+    delta, k = 0.01, 3.0e4
+    phi = lambda d: C.penalty(d, delta, k)  # noqa: E731
+    d1, d2 = jax.grad(phi), jax.grad(jax.grad(phi))
+    for f, scale in ((phi, k * delta), (d1, k), (d2, k / delta)):
+        assert float(f(jnp.asarray(delta))) == 0.0
+        assert float(f(jnp.asarray(1.5 * delta))) == 0.0
+        assert abs(float(f(jnp.asarray(delta * (1 - 1e-6))))) < 1e-5 * scale
+    d = jnp.asarray(0.4 * delta)
+    assert float(d1(d)) == pytest.approx(-k * 0.6**2, rel=1e-12)
+
+
+def test_no_force_while_clear():
+    """A state whose contact pairs are all farther apart than delta feels no contact energy or
+    force: results without contact are unchanged wherever the clearance stays above it."""
+    sc = _scene(gap=0.5)
+    th = jnp.asarray(jr.initial_state(_scene(gap=0.5, contact=False), "up").theta)
+    assert float(C.contact_energy(th, sc)) == 0.0
+    assert float(jnp.max(jnp.abs(jax.grad(C.contact_energy)(th, sc)))) == 0.0
+
+
+@pytest.mark.parametrize("thickness", [0.01, 0.3])
+def test_hessian_against_autodiff(thickness):
+    """The suffix-sum Hessian equals autodiff's, both with few pairs in contact (the closest
+    K are assembled) and with more than K (all are)."""
+    sc = _scene(thickness=thickness, stiffness=10.0)
+    th = _angles(0) if thickness > 0.1 else jr.initial_state(_scene(), "up").theta
+    H1 = jax.hessian(C.contact_energy)(th, sc)
+    H2 = C.contact_hessian(th, sc)
+    assert float(jnp.max(jnp.abs(H1))) > 0.0
+    np.testing.assert_allclose(np.asarray(H2), np.asarray(H1), atol=1e-12 * float(jnp.max(jnp.abs(H1))))
+
+
+def test_gradient_and_hessian_of_the_lagrangian(pressed):
+    """The written-out gradient with contact against autodiff of the scalar Lagrangian and
+    against central differences; the dense structured Hessian against autodiff's."""
+    sc = pressed.scene
+    assert float(C.contact_energy(pressed.theta, sc)) > 0.0  # contact is active here
+    th, mu = pressed.theta + 1e-3 * _angles(1), pressed.force
+    g = jnp.concatenate(lagrangian_gradient(th, mu, sc))
+    z = jnp.concatenate([th, mu])
+    L = lambda z: lagrangian(z[:N], z[N:], sc)  # noqa: E731
+    np.testing.assert_allclose(np.asarray(g), np.asarray(jax.grad(L)(z)), atol=1e-10)
+    e = jnp.zeros(N + 2).at[3].set(1.0)
+    fd = (L(z + 1e-6 * e) - L(z - 1e-6 * e)) / 2e-6
+    assert float(g[3]) == pytest.approx(float(fd), rel=1e-6, abs=1e-8)
+    K = kkt.structured(th, mu, sc)
+    assert isinstance(K, kkt.BorderedDense)
+    np.testing.assert_allclose(np.asarray(K.dense()), np.asarray(jax.hessian(L)(z)), atol=1e-9)
+
+
+# ------------------------------------------------------------------ dense bordered algebra
+@pytest.mark.parametrize("stretch", [False, True])
+def test_dense_bordered_algebra(stretch):
+    """count_below, the smallest constrained eigenvalues, solve and modes of a BorderedDense
+    against dense NumPy: with rigid end constraints (C = 0, eigenvalues of A on the null space
+    of P^T) and with a compliance (C negative definite: A - P C^-1 P^T)."""
+    rng = np.random.default_rng(3)
+    n = 12
+    A = rng.normal(size=(n, n))
+    A = A + A.T
+    P = rng.normal(size=(n, 2))
+    Cm = -np.array([[2.0, 0.3], [0.3, 1.0]]) if stretch else np.zeros((2, 2))
+    K = kkt.BorderedDense(jnp.asarray(A), jnp.asarray(P), jnp.asarray(Cm))
+    if stretch:
+        ref = np.linalg.eigvalsh(A - P @ np.linalg.solve(Cm, P.T))
+    else:
+        Z = np.linalg.qr(P, mode="complete")[0][:, 2:]
+        ref = np.linalg.eigvalsh(Z.T @ A @ Z)
+    np.testing.assert_allclose(np.asarray(kkt.smallest_eigenvalues(K, 4)), ref[:4], atol=1e-10)
+    shifts = jnp.asarray([ref[0] - 0.1, 0.5 * (ref[1] + ref[2]), ref[5] + 1e-6])
+    assert np.asarray(kkt.count_below(K, shifts)).tolist() == [0, 2, 6]
+    r = rng.normal(size=n + 2)
+    a, b = kkt.solve(K, jnp.asarray(r[:n]), jnp.asarray(r[n:]), shift=0.3)
+    M = np.block([[A - 0.3 * np.eye(n), P], [P.T, Cm]])
+    np.testing.assert_allclose(np.concatenate([a, b]), np.linalg.solve(M, r), rtol=1e-9, atol=1e-10)
+    v = np.asarray(kkt.modes(K, kkt.smallest_eigenvalues(K, 2)))
+    lam = np.asarray(kkt.smallest_eigenvalues(K, 2))
+    for k in range(2):  # (A - lam) v + P w = 0 with P^T v + C w = 0
+        w = np.linalg.lstsq(np.vstack([P, Cm]), -np.concatenate([(A - lam[k] * np.eye(n)) @ v[:, k], P.T @ v[:, k]]),
+                            rcond=None)[0]
+        assert np.linalg.norm((A - lam[k] * np.eye(n)) @ v[:, k] + P @ w) < 1e-6
+
+
+# ------------------------------------------------------------------ continuous collision bound
+@pytest.mark.parametrize("seed", range(6))
+def test_step_bound_never_crosses(pressed, seed):
+    """Along theta + tau' step, 0 <= tau' <= step_bound, no two parts of the strip meet:
+    large random steps from the pressed state, checked at 200 points of the path with the
+    independent NumPy crossing test."""
+    sc = pressed.scene
+    step = _angles(10 + seed, scale=0.5)
+    tau = float(C.step_bound(pressed.theta, step, sc))
+    assert 0.0 < tau < 1.0  # the pressed legs limit the step
+    d = jr.discretize(sc)
+    ex = sc.contact.exclusion
+    f = np.asarray(sc.mesh.fractions)
+    for s in np.linspace(0.0, tau, 200):
+        x = np.asarray(C.inextensible_nodes(pressed.theta + s * step, d))
+        far = [(i, j) for i, j in np_crossings(x) if f[j] - f[i + 1] >= ex]
+        assert not far, (s, far)
+
+
+# ------------------------------------------------------------------ equilibria in contact
+def test_pressed_state(pressed):
+    """At G/L = 0.1 the contact-free up state of the flat strip passes through itself; with
+    contact it is a stable equilibrium, clear of itself, with its legs inside the contact
+    thickness and the penetration that the stiffness predicts (line load f: sinks to
+    delta (1 - sqrt(f / k)), here under 25 % of delta)."""
+    free = jr.initial_state(_scene(contact=False), "up")
+    assert free.result == jr.RESULTS.self_intersecting
+    eq = pressed
+    assert eq.result == jr.RESULTS.successful, jr.RESULTS[eq.result]
+    sc = eq.scene
+    m = max(N // 10, 2)
+    c = float(jr.clearance(eq.theta, sc, min_separation=m))
+    delta = float(sc.contact.thickness)
+    assert 0.75 * delta < c < delta
+    assert not np_crossings(np.asarray(jr.node_positions(eq)))
+    assert float(jr.energies(eq)["contact"]) > 0.0
+    assert float(jr.stability(eq).eigenvalues[0]) > 0.0
+
+
+def test_pressed_states_never_cross():
+    """Fuzz: up and down states at gaps 0.04-0.14 and clamp angles within +-30 deg, with
+    contact: every one found is a stable equilibrium that does not pass through itself."""
+    rng = np.random.default_rng(7)
+    found = 0
+    for k in range(6):
+        g = float(rng.uniform(0.04, 0.14))
+        a = float(rng.uniform(-30.0, 30.0))
+        psi = float(rng.choice([60.0, 120.0, 180.0]))
+        eq = jr.initial_state(_scene(psi, g, a), "up" if k % 2 else "down")
+        assert eq.result in (jr.RESULTS.successful, jr.RESULTS.state_not_found), jr.RESULTS[eq.result]
+        if eq.result == jr.RESULTS.successful:
+            found += 1
+            assert not np_crossings(np.asarray(jr.node_positions(eq))), (psi, g, a)
+            assert float(jr.stability(eq).eigenvalues[0]) > 0.0
+    assert found >= 4
+
+
+def test_clear_states_unchanged():
+    """Where the strip stays more than delta from itself (G/L = 0.3) contact changes nothing:
+    the same state to the Newton tolerance."""
+    a = jr.initial_state(_scene(60.0, 0.3, 10.0), "up")
+    b = jr.initial_state(_scene(60.0, 0.3, 10.0, contact=False), "up")
+    assert a.result == b.result == jr.RESULTS.successful
+    assert float(jr.clearance(a.theta, a.scene, min_separation=max(N // 10, 2))) > 0.01
+    np.testing.assert_allclose(np.asarray(a.theta), np.asarray(b.theta), atol=1e-9)
+
+
+def test_bad_contact_input():
+    for kw, name in [({"thickness": -0.01}, "thickness"), ({"stiffness": 0.0}, "stiffness"),
+                     ({"exclusion": 1.5}, "exclusion")]:
+        with pytest.raises(ValueError, match=name):
+            jr.Contact(**kw)
+    with pytest.raises(ValueError, match="contact"):
+        jr.make_scene(60, 0.5, contact=0.01)
+
+
+# ------------------------------------------------------------------ dynamics with contact
+def test_undamped_run_with_contact_conserves_energy(pressed):
+    """The pressed state at G/L = 0.1 kicked along its lowest mode (the pressed legs slide
+    and knock against each other), undamped, 0.5 T: the energy balance closes
+    to 1e-3 of the potential energy and no frame passes through itself."""
+    sc = pressed.scene
+    # the lowest constrained mode (it keeps the right end still), as an angular velocity
+    omega0 = 100.0 * jr.stability(pressed).modes[:, 0]
+    tr = jr.simulate(sc, pressed.theta, jr.Protocol(), omega0=omega0, t1=0.5, stop_at_snap=False,
+                     n_frames=16, energy_tol=1e-3)
+    assert tr.result == jr.RESULTS.successful, jr.RESULTS[tr.result]
+    E = np.asarray(tr.kinetic + tr.potential - tr.clamp_work)
+    ok = np.isfinite(E)
+    err = np.abs(E[ok] - E[0]).max() / float(tr.potential[0])
+    assert err < 1e-3, err
+    assert float(np.max(np.asarray(tr.kinetic))) > 0.1 * float(tr.potential[0])  # a real kick
+    for x in np.asarray(tr.positions):
+        assert not np_crossings(x)
+    ec = np.array([float(C.contact_energy(t, sc)) for t in tr.theta])
+    assert np.all(ec[np.isfinite(ec)] > 0.0) and np.ptp(ec) > 0.1 * ec[0]  # in contact throughout, working
