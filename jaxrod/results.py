@@ -35,8 +35,9 @@ class RESULTS(eqx.Enumeration):
         "the named state."
     )
     self_intersecting = (
-        "A reported state passes through itself (two segments that are not neighbours cross): the model has "
-        "no contact, so the state is not physical; see jaxrod.clearance."
+        "A reported state passes through itself (two segments that are not neighbours cross), so it is not "
+        "physical: model self-contact (jaxrod.Contact; the CLI does so by default where a state needs it); "
+        "see jaxrod.clearance."
     )
     derivative_unavailable = (
         "The extended-system refinement of the critical point did not converge, so alpha_c is the bisection "

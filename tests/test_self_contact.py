@@ -215,3 +215,80 @@ def test_undamped_run_with_contact_conserves_energy(pressed):
         assert not np_crossings(x)
     ec = np.array([float(C.contact_energy(t, sc)) for t in tr.theta])
     assert np.all(ec[np.isfinite(ec)] > 0.0) and np.ptp(ec) > 0.1 * ec[0]  # in contact throughout, working
+
+
+# ------------------------------------------------------------------ snap paths, phase diagram, CLI (nightly)
+@pytest.mark.slow  # ~2 min: snap_angles compiled with contact
+def test_snap_angles_with_contact():
+    """N = 48. Psi0 = 60 deg, G/L = 0.3: the up path stays clear of itself and is unchanged
+    by contact to 1e-9 deg; Psi0 = 60 deg, G/L = 0.2: the contact-free paths pass through
+    themselves (flagged), with contact both snap, successful, and no reported state crosses;
+    the flat strip at G/L = 0.1 snaps symmetrically (alpha_c_down = -alpha_c_up)."""
+    m = 5
+    free = jr.snap_angles(_scene(60.0, 0.3, n=48, contact=False))
+    with_c = jr.snap_angles(_scene(60.0, 0.3, n=48))
+    assert free.up.result == with_c.up.result == jr.RESULTS.successful
+    assert float(jr.clearance(free.up.theta_before, _scene(60.0, 0.3, n=48), min_separation=m)) > 0.01
+    assert abs(np.degrees(float(free.up.alpha_c - with_c.up.alpha_c))) < 1e-9
+    sc = _scene(60.0, 0.2, n=48)
+    free = jr.snap_angles(_scene(60.0, 0.2, n=48, contact=False))
+    r = jr.snap_angles(sc)
+    assert jr.RESULTS.self_intersecting in (free.up.result, free.down.result)
+    for p in (r.up, r.down):
+        assert p.result == jr.RESULTS.successful, jr.RESULTS[p.result]
+        assert bool(p.snaps)
+        for th in (p.theta_before, p.theta_after):
+            assert not np_crossings(np.asarray(C.inextensible_nodes(th, jr.discretize(sc))))
+    flat = jr.snap_angles(_scene(180.0, 0.1, n=48))
+    assert flat.up.result == flat.down.result == jr.RESULTS.successful
+    assert float(flat.up.alpha_c) == pytest.approx(-float(flat.down.alpha_c), abs=1e-6)
+
+
+@pytest.mark.slow  # ~2 min
+def test_phase_diagram_with_contact_to_small_gaps():
+    """The phase diagram with contact down to G/L = 0.05: every path successful on a small
+    grid where the contact-free one is flagged self_intersecting at the small gaps."""
+    gaps = [0.05, 0.1, 0.2]
+    ds = jr.phase_diagram([60.0, 180.0], gaps, n=48, contact=jr.Contact(), progress=False)
+    ok = int(jr.RESULTS.successful._value)
+    assert np.all(np.asarray(ds["result_up"]) == ok) and np.all(np.asarray(ds["result_down"]) == ok)
+    assert np.all(np.isfinite(np.asarray(ds["alpha_c_up"])))
+    assert "thickness 0.01" in ds.attrs["contact"]
+
+
+# ------------------------------------------------------------------ CLI
+def _cli(args, capsys):
+    from jaxrod.cli import main
+
+    old = jax.config.jax_enable_x64
+    try:
+        code = main(args)
+    finally:
+        jax.config.update("jax_enable_x64", old)
+    return code, *capsys.readouterr()
+
+
+def test_cli_contact_by_default_where_needed(capsys):
+    """`jaxrod equilibrium` at G/L = 0.1: by default contact is switched on because the
+    contact-free state passes through itself; `--no-contact` reports that state flagged."""
+    import json
+
+    base = ["equilibrium", "--psi0", "180", "--gap", "0.1", "--state", "up", "--n", str(N), "--json"]
+    code, out, _ = _cli(base, capsys)
+    rec = json.loads(out)
+    assert code == 0 and rec["contact"] is True and rec["contact_thickness"] == 0.01
+    assert 0.0075 < rec["clearance"] < 0.01 and rec["contact_energy"] > 0.0
+    code, out, _ = _cli(base + ["--no-contact"], capsys)
+    rec = json.loads(out)
+    assert code == 3 and rec["contact"] is False and rec["result_code"] == "self_intersecting"
+    code, out, _ = _cli(["equilibrium", "--psi0", "180", "--gap", "0.5", "--n", str(N), "--json"], capsys)
+    rec = json.loads(out)
+    assert code == 0 and rec["contact"] is False and rec["clearance"] > 0.01  # not needed: not modelled
+
+
+@pytest.mark.parametrize("args,name", [(["--contact-thickness", "0"], "thickness"),
+                                       (["--contact-thickness", "0.02", "--no-contact"], "contact-thickness")])
+def test_cli_bad_contact_options(args, name, capsys):
+    code, out, err = _cli(["equilibrium", *args], capsys)
+    assert code == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1 and name in err and "Traceback" not in err

@@ -61,7 +61,7 @@ from ._continuation import Continuation, SymmetricAlpha
 from ..statics import float_scene, solve_equilibrium
 from ..statics import initial_state_signed, still_tracked
 from .._misc import check_grid, package_version, run_if as _run_if, run_if_each
-from ..model import Clamps, Mesh, Scene, Strip
+from ..model import Clamps, Contact, Mesh, Scene, Strip
 from ._snap import _snap_angles_from
 from ..results import RESULTS
 from ..sweeps import agree, MODES, ShardedMap
@@ -97,20 +97,34 @@ def _warm_or_homotopy(scene, sgn, t_prev, m_prev, ok_prev):
 
 
 @eqx.filter_jit
-def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation()):
+def _contact(key):
+    """A `Contact` from its `(thickness, stiffness, exclusion)` key, None for None."""
+    return None if key is None else Contact(*key)
+
+
+def _contact_key(contact):
+    if contact is None:
+        return None
+    if not isinstance(contact, Contact):
+        raise ValueError(f"contact must be a jaxrod.Contact or None, got {type(contact).__name__}")
+    return (float(contact.thickness), float(contact.stiffness), float(contact.exclusion))
+
+
+def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), contact=None):
     """All gaps at one fold angle (rad), one gap after the other (`lax.scan`): the start
     states of each gap by Newton from the previous gap's (homotopy where that fails), then
     `snap_angles` from them without the extended-system polish (bisection values) and
     without following the landed branch. `keep_branch` (static) also returns each path's
     walked branch (`branch_up`, `branch_down`: the first continuation stage, a `Branch`
-    per gap) for the tests that check the walks themselves."""
+    per gap) for the tests that check the walks themselves. `contact`: a
+    `(thickness, stiffness, exclusion)` key of the scenes' `jaxrod.Contact`, or None."""
     par = SymmetricAlpha()
     dtype = psi0.dtype
     N = mesh.n
 
     def one(carry, g):
         t_prev, m_prev, ok_prev = carry
-        scene = par.set(float_scene(Scene(Strip(psi0=psi0, s0=s0), Clamps(g), mesh)), 0.0)
+        scene = par.set(float_scene(Scene(Strip(psi0=psi0, s0=s0), Clamps(g), mesh, contact=_contact(contact))), 0.0)
         # both start states through one traced body (`lax.map` over the side): one compiled
         # copy of the warm Newton and of the homotopy instead of two (XLA compile at -O0 25 s -> 20 s)
         is_sds = lambda x: isinstance(x, jax.ShapeDtypeStruct)  # noqa: E731
@@ -142,9 +156,9 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation()):
 
 
 @eqx.filter_jit
-def _grid(psis, gaps, s0, mesh, settings=Continuation()):
+def _grid(psis, gaps, s0, mesh, settings=Continuation(), contact=None):
     """All chunks in one call: `vmap` over the fold angles (rad) of `_chunk`."""
-    return jax.vmap(lambda p: _chunk(p, gaps, s0, mesh, settings=settings))(psis)
+    return jax.vmap(lambda p: _chunk(p, gaps, s0, mesh, settings=settings, contact=contact))(psis)
 
 
 def _resolve_batch(batch):
@@ -158,17 +172,19 @@ def _resolve_batch(batch):
 
 
 @functools.lru_cache(maxsize=8)
-def _sharded(mesh, settings, devices, per_device, mode):
+def _sharded(mesh, settings, devices, per_device, mode, contact=None):
     """One `ShardedMap` of `_chunk` per mesh and split (so repeated calls reuse its compilation)."""
-    return ShardedMap(lambda psi0, shared: _chunk(psi0, shared[0], shared[1], mesh, settings=settings),
+    return ShardedMap(lambda psi0, shared: _chunk(psi0, shared[0], shared[1], mesh, settings=settings,
+                                                  contact=contact),
                       devices=devices, per_device=per_device, mode=mode)
 
 
-def _attrs(gaps, s0, n, refine):
+def _attrs(gaps, s0, n, refine, contact=None):
     # `chunk_variables` (not `variables`: scipy's netcdf_file has an attribute of that name):
     # a chunk written by a version with other variables is recomputed
     return {"gaps_hash": ",".join(f"{g:.12g}" for g in gaps), "s0": float(s0), "n": int(n),
-            "refine": float(refine), "chunk_variables": ",".join(VARIABLES)}
+            "refine": float(refine), "chunk_variables": ",".join(VARIABLES),
+            "contact": "none" if contact is None else "thickness {:.12g} stiffness {:.12g} exclusion {:.12g}".format(*contact)}
 
 
 def _chunk_dataset(psi0_deg, gaps, values, attrs):
@@ -221,11 +237,12 @@ def _write(ds, path):
 
 
 def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progress=True, on_chunk=None,
-                  batch="auto", devices=None, per_device=1, split="shard_map"):
+                  batch="auto", devices=None, per_device=1, split="shard_map", contact=None):
     r"""Critical clamp angles over the grid `psi0_deg` x `gaps` (an `xarray.Dataset`).
 
     **Arguments:** `psi0_deg` fold angles in (0, 180] (degrees), `gaps` values of $G/L$ in
-    (0, 1), `s0`, `n`, `refine` as in [`jaxrod.make_scene`][]; `out` a directory for the
+    (0, 1), `s0`, `n`, `refine`, `contact` (a [`jaxrod.Contact`][]: self-contact modelled)
+    as in [`jaxrod.make_scene`][]; `out` a directory for the
     resumable chunk files and `phase_diagram.nc`; `progress` a tqdm bar;
     `on_chunk(psi0_deg, computed: bool)` called after each chunk; `batch` `"scan"` (one
     compiled call per $\Psi_0$), `"vmap"` (every $\Psi_0$ still to compute in one vmapped
@@ -251,7 +268,8 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
 
     psis, gaps = check_grid(psi0_deg, gaps, s0, "phase_diagram")
     mesh = Mesh(n, refine)
-    attrs = _attrs(gaps, s0, n, refine)
+    ckey = _contact_key(contact)
+    attrs = _attrs(gaps, s0, n, refine, ckey)
     if out is not None:
         os.makedirs(os.path.join(out, "chunks"), exist_ok=True)
     g_arr = jnp.asarray(gaps, jnp.float64)
@@ -269,11 +287,12 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     batched = {}
     if batch == "vmap" and todo:
         # one call for every chunk still missing (the finished ones were read back above)
-        vals = jax.device_get(_grid(jnp.asarray([math.radians(p) for p in todo], jnp.float64), g_arr, s0_arr, mesh))
+        vals = jax.device_get(_grid(jnp.asarray([math.radians(p) for p in todo], jnp.float64), g_arr, s0_arr, mesh,
+                                     contact=ckey))
         batched = {p: {k: v[i] for k, v in vals.items()} for i, p in enumerate(todo)}
     sharded = None
     if batch == "shard":
-        sharded = _sharded(mesh, Continuation(), None if devices is None else tuple(devices), per_device, split)
+        sharded = _sharded(mesh, Continuation(), None if devices is None else tuple(devices), per_device, split, ckey)
     chunks, computed = [], []
     it = psis
     if progress and lead:
@@ -290,7 +309,8 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
                 batched.update({q: {k: v[i] for k, v in vals.items()} for i, q in enumerate(left)})
             vals = batched.pop(p, None)
             if vals is None:
-                vals = jax.device_get(_chunk(jnp.asarray(math.radians(p), jnp.float64), g_arr, s0_arr, mesh))
+                vals = jax.device_get(_chunk(jnp.asarray(math.radians(p), jnp.float64), g_arr, s0_arr, mesh,
+                                             contact=ckey))
             ds = _chunk_dataset(p, gaps, vals, attrs)
             if out is not None and lead:
                 _write(ds, _chunk_path(out, p))

@@ -28,8 +28,9 @@ import os
 
 from ..dynamics import NUDGE
 from ..results import RESULTS
-from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _result_name, add_distributed_args,
-                    add_scene_args, make_scene_from_args)
+from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _contact_record, _result_name,
+                    add_contact_args, add_distributed_args, add_scene_args, clearance_separation, contact_mode,
+                    make_scene_from_args, needs_contact)
 
 PAPER_FIT = (42.59, 30.38, 5.00)
 
@@ -51,6 +52,7 @@ def register(sub):
     """Add `snap` and `speed-plane` to the `jaxrod` argument parser."""
     p = sub.add_parser("snap", help="integrate one dynamic snap, report the snapping speed v_s")
     add_scene_args(p)
+    add_contact_args(p)
     p.add_argument("--scene", choices=("brink", "ramp", "asymmetric"), default="brink",
                    help="brink (critical state nudged), ramp (clamps rotated through alpha_c), asymmetric "
                         "(only the right clamp rotated from --alpha-right, left held at --alpha)")
@@ -178,8 +180,6 @@ def _clearance(scene, tr):
 
     import jaxrod as jr
 
-    from ._main import clearance_separation
-
     th = np.asarray(tr.theta)
     th = th[np.all(np.isfinite(th), axis=1)]  # frames after the run's stop are inf
     if not th.size:
@@ -194,12 +194,21 @@ def _clearance(scene, tr):
 def _cmd_snap(args):
     _check_run_args(args)
     phys = _physical(args)
-    scene = _array_leaves(make_scene_from_args(args))
-    start, tr = run_snap(scene, args, args.scene)
-    rec = _record(start, tr, phys)
-    c = _clearance(start.scene, tr)
-    rec["clearance"] = c if math.isfinite(c) else None
     import jaxrod as jr
+
+    def run(scene):
+        start, tr = run_snap(_array_leaves(scene), args, args.scene)
+        rec = _record(start, tr, phys)
+        m = clearance_separation(args.n)
+        c0 = float(jr.clearance(start.theta0, start.scene, min_separation=m)) / float(start.scene.strip.length)
+        c = min(_clearance(start.scene, tr), c0)  # the start state and every frame
+        rec["clearance"] = c if math.isfinite(c) else None
+        rec.update(_contact_record(start.scene))
+        return start, tr, rec
+
+    start, tr, rec = run(make_scene_from_args(args))
+    if contact_mode(args) == "auto" and needs_contact([rec["clearance"]], [rec["result"]]):
+        start, tr, rec = run(make_scene_from_args(args, contact=True))
 
     from ..plot import animate_snap, plot_snap
 

@@ -86,6 +86,38 @@ def add_scene_args(p):
                    help="gravity g in units of B/(lambda L^3) (default: none)")
 
 
+def add_contact_args(p):
+    g = p.add_argument_group("self-contact (by default modelled only where a state needs it)")
+    g.add_argument("--contact-thickness", type=_number, default=None, metavar="H",
+                   help="model self-contact in every run, the centrelines touching at H (in L; jaxrod.Contact). "
+                        "Default: run without contact and, where a reported state comes within 0.01 L of itself "
+                        "(or passes through itself), run again with contact at H = 0.01")
+    g.add_argument("--no-contact", action="store_true",
+                   help="never model self-contact (a state through itself is reported as self_intersecting)")
+
+
+def contact_mode(args):
+    """'on' (`--contact-thickness`), 'off' (`--no-contact`) or 'auto'."""
+    h, off = getattr(args, "contact_thickness", None), getattr(args, "no_contact", False)
+    if h is not None and off:
+        raise InputError("contact-thickness: --contact-thickness and --no-contact exclude each other")
+    return "on" if h is not None else ("off" if off else "auto")
+
+
+def needs_contact(clearances, results):
+    """Auto mode: a reported state within the default contact thickness of itself (clearance
+    in L, None where unknown) or passing through itself."""
+    from ..model._scene import CONTACT_THICKNESS
+
+    return (any(c is not None and c < CONTACT_THICKNESS for c in clearances)
+            or any(r == "self_intersecting" for r in results))
+
+
+def _contact_record(scene):
+    c = scene.contact
+    return {"contact": c is not None, "contact_thickness": None if c is None else float(c.thickness)}
+
+
 def _build_parser():
     from .. import __version__
 
@@ -105,6 +137,7 @@ def _build_parser():
                                    "of the constrained Hessian (asymmetric modes included).",
                        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_scene_args(p)
+    add_contact_args(p)
     p.add_argument("--state", choices=("up", "down"), default="down",
                    help="which state: up (fold height > 0) or down (< 0) (default %(default)s)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
@@ -122,6 +155,7 @@ def _build_parser():
                                    "--alpha is ignored (the loop starts at 0).",
                        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_scene_args(q)
+    add_contact_args(q)
     q.add_argument("--no-extrapolate", dest="extrapolate", action="store_false",
                    help="report the angles of the n-segment mesh only (error up to ~0.17 deg at n = 100) instead "
                         "of the default Richardson extrapolation from n and 2n segments (error ~1e-4 deg)")
@@ -143,10 +177,20 @@ def _build_parser():
     return parser
 
 
-def make_scene_from_args(args):
+def make_scene_from_args(args, contact=None):
+    """The scene of the parsed arguments; with self-contact where `--contact-thickness` is
+    given, or where `contact` is True (auto mode's second run, default thickness)."""
     import jaxrod as jr
 
     stretching = gravity = None
+    model = None
+    if contact_mode(args) == "on":
+        try:
+            model = jr.Contact(args.contact_thickness)
+        except ValueError as e:
+            raise InputError(f"contact-thickness: {e}") from None
+    elif contact:
+        model = jr.Contact()
     if args.stretching is not None:
         try:
             stretching = jr.Stretching(args.stretching)
@@ -159,7 +203,7 @@ def make_scene_from_args(args):
             raise InputError(f"gravity: {e}") from None
     try:
         return jr.make_scene(args.psi0, args.gap, args.alpha, alpha_right_deg=args.alpha_right, s0=args.s0,
-                             n=args.n, refine=args.refine, stretching=stretching, gravity=gravity)
+                             n=args.n, refine=args.refine, stretching=stretching, gravity=gravity, contact=model)
     except ValueError as e:
         raise InputError(str(e)) from None
 
@@ -230,6 +274,7 @@ def _record(eq, state, k=4, angles_deg=None):
         "bending_energy": _finite(en["bending"]),
         "stretching_energy": _finite(en["stretching"]),
         "gravity_energy": _finite(en["gravity"]),
+        "contact_energy": _finite(en["contact"]),
         "total_energy": _finite(en["total"]),
         "compression": _finite(jr.compression(eq)),
         "min_eigenvalue": lam[0],
@@ -245,7 +290,7 @@ def _record(eq, state, k=4, angles_deg=None):
     return rec
 
 
-_OBSERVABLES = ("fold_height", "bending_energy", "stretching_energy", "gravity_energy", "total_energy",
+_OBSERVABLES = ("fold_height", "bending_energy", "stretching_energy", "gravity_energy", "contact_energy", "total_energy",
                 "compression", "min_eigenvalue", "eigenvalues", "eigenvalue_parity", "num_unstable")
 
 
@@ -276,6 +321,11 @@ def _summary(rec):
         lines.insert(4, f"  stretching en.  {_fmt(rec['stretching_energy'], '.6g')} B/L")
     if rec["gravity"] is not None:
         lines.insert(4, f"  gravity energy  {_fmt(rec['gravity_energy'], '.6g')} B/L")
+    if rec.get("clearance") is not None:
+        lines.append(f"  clearance       {rec['clearance']:.4f} L")
+    if rec.get("contact"):
+        lines.append(f"  self-contact    modelled, thickness {rec['contact_thickness']:g} L, "
+                     f"contact energy {_fmt(rec['contact_energy'], '.6g')} B/L")
     return "\n".join(lines)
 
 
@@ -352,9 +402,19 @@ def _cmd_equilibrium(args):
     scene = make_scene_from_args(args)  # validates before anything is compiled
     import jaxrod as jr
 
-    eq = jr.initial_state(_array_leaves(scene), args.state)
     a_r = args.alpha if args.alpha_right is None else args.alpha_right
-    rec = _record(eq, args.state, angles_deg=(args.psi0, args.alpha, a_r))
+
+    def solve(scene):
+        eq = jr.initial_state(_array_leaves(scene), args.state)
+        rec = _record(eq, args.state, angles_deg=(args.psi0, args.alpha, a_r))
+        c = float(jr.clearance(eq.theta, eq.scene, force=eq.force, min_separation=clearance_separation(args.n)))
+        rec["clearance"] = _finite(c / float(eq.scene.strip.length))
+        rec.update(_contact_record(eq.scene))
+        return eq, rec
+
+    eq, rec = solve(scene)
+    if contact_mode(args) == "auto" and needs_contact([rec["clearance"]], [rec["result_code"]]):
+        eq, rec = solve(make_scene_from_args(args, contact=True))
     if args.plot:
         try:
             jr.plot_equilibria([eq], [args.state], args.plot)
@@ -435,11 +495,21 @@ def _cmd_snap_angles(args):
     import jaxrod as jr
     from . import _exported
 
-    scene = _array_leaves(scene)
-    # one exported program per (query, mesh): a repeated query traces nothing
+    # one exported program per (query, mesh, contact model): a repeated query traces nothing
     name = "snap_angles_extrapolated" if args.extrapolate else "snap_angles"
-    out, _ = _exported.call(name, functools.partial(_snap_arrays, extrapolate=bool(args.extrapolate)), scene)
-    out = {k: np.asarray(v) for k, v in out.items()}
+
+    def run(scene):
+        out, _ = _exported.call(name, functools.partial(_snap_arrays, extrapolate=bool(args.extrapolate)),
+                                _array_leaves(scene))
+        return {k: np.asarray(v) for k, v in out.items()}
+
+    out = run(scene)
+    if contact_mode(args) == "auto":
+        clear = [float(out[f"clearance_{d}"]) for d in ("up", "down")]
+        res = [_result_name(out[f"result_{d}"]) for d in ("up", "down")]
+        if needs_contact([c if np.isfinite(c) else None for c in clear], res):
+            scene = make_scene_from_args(args, contact=True)
+            out = run(scene)
 
     def val(x, deg=False):
         x = float(x)
@@ -448,7 +518,7 @@ def _cmd_snap_angles(args):
         return float(np.degrees(x)) if deg else x
 
     rec = {"psi0_deg": args.psi0, "gap": args.gap, "s0": args.s0, "n": args.n, "refine": args.refine,
-           "extrapolated": bool(args.extrapolate)}
+           "extrapolated": bool(args.extrapolate), **_contact_record(scene)}
     if args.extrapolate:
         rec["n_fine"] = jr.refined_scene(scene).mesh.n
     for name in ("up", "down"):
@@ -491,6 +561,8 @@ def _cmd_snap_angles(args):
                       f"{abs(a2 - a):.3f} deg further")
             if rec[f"clearance_{name}"] is not None:
                 print(f"           clearance {rec[f'clearance_{name}']:.4f} L")
+        if rec["contact"]:
+            print(f"self-contact modelled (thickness {rec['contact_thickness']:g} L)")
     if failed:
         print(f"jaxrod snap-angles: path result {', '.join(sorted(set(failed)))} (see jaxrod.RESULTS)",
               file=sys.stderr)
