@@ -107,7 +107,7 @@ def contact_mode(args):
 def needs_contact(clearances, results):
     """Auto mode: a reported state within the default contact thickness of itself (clearance
     in L, None where unknown) or passing through itself."""
-    from ..model._scene import CONTACT_THICKNESS
+    from ..model import CONTACT_THICKNESS
 
     return (any(c is not None and c < CONTACT_THICKNESS for c in clearances)
             or any(r == "self_intersecting" for r in results))

@@ -179,7 +179,7 @@ CONTACT_COURANT = 0.1
 def _contact_dt(scene):
     """The contact's step limit in units of T (1 / omega_c T times CONTACT_COURANT); from the
     scene's contact leaves where they are concrete, else from `jaxrod.Contact`'s defaults."""
-    from ..model._scene import CONTACT_STIFFNESS, CONTACT_THICKNESS
+    from ..model import CONTACT_STIFFNESS, CONTACT_THICKNESS
 
     c, st = scene.contact, scene.strip
     try:

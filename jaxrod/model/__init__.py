@@ -1,11 +1,14 @@
 """What the strip is: its material and crease (`Strip`), mesh (`Mesh`), clamps (`Clamps`),
-optional stretching and gravity, and the `Scene` that bundles them (`make_scene`).
+optional stretching, gravity and self-contact (`Contact`), and the `Scene` that bundles them
+(`make_scene`).
 
 The bottom layer: it imports nothing else from jaxrod.
 """
 
 from ._scene import Clamps as Clamps
 from ._scene import Contact as Contact
+from ._scene import CONTACT_STIFFNESS as CONTACT_STIFFNESS
+from ._scene import CONTACT_THICKNESS as CONTACT_THICKNESS
 from ._scene import Gravity as Gravity
 from ._scene import make_scene as make_scene
 from ._scene import Mesh as Mesh
