@@ -107,6 +107,9 @@ def table(psis, gaps, n, progress):
                     rec[f"clearance_{d}"] = _clear(p, sc, max(n // 10, 2))
                     s = snap_speed_run(sc, d)
                     rec[f"v_s_{d}"] = float(s.v_s)
+                    # the trajectory's own peak, also where the critical point was not refined
+                    # (derivative_unavailable: the brink at the bisection value of alpha_c)
+                    rec[f"v_s_raw_{d}"] = float(s.v_s_raw)
                     rec[f"v_s_result_{d}"] = jr.result_name(s.result)
                     rec[f"energy_drift_{d}"] = float(s.energy_drift)
                 rec["seconds"] = time.perf_counter() - t0
@@ -183,7 +186,7 @@ def main(argv=None):
             p = np.radians(r["psi0_deg"])
             icpt = fit["v_m"] - fit["b"] * p
             icpt_paper = PAPER_PLANE[0] - PAPER_PLANE[2] * p
-            v = np.nanmax([r["v_s_up"], r["v_s_down"]])
+            v = np.nanmax([r["v_s_raw_up"], r["v_s_raw_down"]])
             limit.append(dict(psi0_deg=r["psi0_deg"], gap=g0, v_s_max=float(v), intercept_jaxrod=icpt,
                               intercept_paper=icpt_paper, ratio_jaxrod=float(v / icpt),
                               ratio_paper=float(v / icpt_paper)))
@@ -222,9 +225,11 @@ def write_md(meta, res, path, suffix):
         for d in ("up", "down"):
             row += [_f(r[f"alpha_c_{d}_deg"]), f"{r[f'kind_{d}']}, {r[f'result_{d}']}",
                     _f(r[f"clearance_{d}"], "{:.4f}"),
-                    _f(r[f"v_s_{d}"], "{:.2f}") + ("" if r[f"v_s_result_{d}"] == "successful"
-                                                   else f" ({r[f'v_s_result_{d}']})")]
+                    _f(r[f"v_s_{d}"], "{:.2f}") if r[f"v_s_result_{d}"] == "successful"
+                    else (f"{_f(r[f'v_s_raw_{d}'], '{:.2f}')}* ({r[f'v_s_result_{d}']})")]
         L.append("| " + " | ".join(row) + " |")
+    L += ["", "*: the run's peak fold speed where `snap_speed` gives no value (`derivative_unavailable`: the "
+          "brink at the bisection value of alpha_c, whose extended-system refinement failed).", ""]
     ph = res["phase"]
     L += ["", f"## Phase diagram down to G/L = {min(ph['gaps']):g}", "",
           f"{len(ph['psi0_deg'])} x {len(ph['gaps'])} grid: with contact {ph['contact']['seconds']:.0f} s, "
@@ -239,7 +244,7 @@ def write_md(meta, res, path, suffix):
     L += ["", "Per gap, in the order of the grid: ok = successful, X = self_intersecting (the contact-free model "
           "passes through itself), others by their `jaxrod.RESULTS` name.", "",
           "## The speed plane's G/L = 0 intercept", "",
-          "| Psi0 | G/L | v_s with contact (max of up, down) | jaxrod plane intercept | ratio | paper plane intercept "
+          "| Psi0 | G/L | v_s with contact (max of up, down; peak of the run) | jaxrod plane intercept | ratio | paper plane intercept "
           "| ratio |", "|---|---|---|---|---|---|---|"]
     for r in res["intercept"]:
         L.append(f"| {r['psi0_deg']:g} | {r['gap']:g} | {r['v_s_max']:.2f} | {r['intercept_jaxrod']:.2f} "
