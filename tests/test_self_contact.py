@@ -292,3 +292,15 @@ def test_cli_bad_contact_options(args, name, capsys):
     code, out, err = _cli(["equilibrium", *args], capsys)
     assert code == 2 and out == ""
     assert len(err.strip().splitlines()) == 1 and name in err and "Traceback" not in err
+
+
+def test_contact_in_physical_units():
+    """`Contact.for_strip`: the physical thickness, and the stiffness 1e5 B/L^3 in the strip's
+    own units, so that the same strip in SI units has the same contact as in L = B = 1."""
+    st = jr.Strip.from_physical(youngs_modulus=4.5e9, density=1380.0, thickness=250e-6, width=0.02, length=0.2)
+    c = jr.Contact.for_strip(st, thickness=250e-6)
+    B, L = float(st.bending_stiffness), float(st.length)
+    assert float(c.thickness) == 250e-6
+    assert float(c.stiffness) == pytest.approx(1e5 * B / L**3, rel=1e-12)
+    d = jr.Contact.for_strip(jr.Strip())
+    assert float(d.thickness) == pytest.approx(0.01) and float(d.stiffness) == pytest.approx(1e5)

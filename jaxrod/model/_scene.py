@@ -219,6 +219,7 @@ class Contact(eqx.Module):
 
     - `thickness` $\delta$ (units of L; default 0.01 L): the distance at which the
       centrelines touch, i.e. the strip's thickness $t$ when physical units are used
+      (`Contact.for_strip(strip, thickness=t)` for a strip in SI units)
       (PET strips of the paper: $t/L\approx 4\cdot10^{-4}$-$1.3\cdot10^{-3}$). A
       thickness below the mesh size $h$ is allowed (the node-to-segment distance cannot
       tunnel) but the penalty's stiffness $2k/\delta$ then sets the dynamics' step.
@@ -243,6 +244,16 @@ class Contact(eqx.Module):
         self.thickness = _leaf(thickness)
         self.stiffness = _leaf(stiffness)
         self.exclusion = float(exclusion)
+
+    @classmethod
+    def for_strip(cls, strip, thickness=None, stiffness=None, exclusion=0.1):
+        """Contact in the units of `strip` (for example SI, from `Strip.from_physical`): the
+        `thickness` is the strip's physical thickness $t$ (default 0.01 L), the stiffness
+        $10^5\,B/L^3$ with the strip's own B and L unless given."""
+        L, B = strip.length, strip.bending_stiffness
+        t = CONTACT_THICKNESS * L if thickness is None else thickness
+        k = CONTACT_STIFFNESS * B / L**3 if stiffness is None else stiffness
+        return cls(t, k, exclusion)
 
 
 class Scene(eqx.Module):
