@@ -247,7 +247,7 @@ class Contact(eqx.Module):
 
     @classmethod
     def for_strip(cls, strip, thickness=None, stiffness=None, exclusion=0.1):
-        """Contact in the units of `strip` (for example SI, from `Strip.from_physical`): the
+        r"""Contact in the units of `strip` (for example SI, from `Strip.from_physical`): the
         `thickness` is the strip's physical thickness $t$ (default 0.01 L), the stiffness
         $10^5\,B/L^3$ with the strip's own B and L unless given."""
         L, B = strip.length, strip.bending_stiffness
