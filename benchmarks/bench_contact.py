@@ -2,7 +2,8 @@
 
 1. Cost (N = 48 and 100, a state with its legs pressed together, Psi0 = 180 deg, G/L = 0.1):
    one Hessian assembly and one Newton solve of the KKT system with contact (dense) and
-   without (bordered tridiagonal); one `snap_angles` (run, compile excluded) and its compile.
+   without (bordered tridiagonal); one `snap_angles` (run, compile excluded) and its compile;
+   one brink snap (`snap_dynamics`, Psi0 = 60 deg, G/L = 0.2, down).
 2. Snap angles and brink snap speeds with and without contact at G/L = 0.1, 0.2, 0.3 (and
    0.05) for Psi0 = 30, 60, 90, 180 deg (N = 48): alpha_c, kind, result code, clearance of the
    reported states (segments at least N/10 apart), v_s.
@@ -13,6 +14,7 @@
 
     python benchmarks/bench_contact.py            # everything (about 25 min on 2 cores)
     python benchmarks/bench_contact.py --quick    # fewer points
+    python benchmarks/bench_contact.py --costs-only   # re-measure the costs into the results
 
 Writes benchmarks/results/contact{_quick}.json, .md and contact_phase{_quick}.png.
 """
@@ -78,6 +80,11 @@ def costs(ns):
             run = time.perf_counter() - t0
             rec[f"snap_angles_s_{name}"] = run
             rec[f"snap_angles_compile_s_{name}"] = first - run
+            # one brink snap down (its snap path, then RATTLE to the overshoot)
+            jax.block_until_ready(jr.snap_dynamics(s, "down")[1].v_s)
+            t0 = time.perf_counter()
+            jax.block_until_ready(jr.snap_dynamics(s, "down")[1].v_s)
+            rec[f"snap_s_{name}"] = time.perf_counter() - t0
         out.append(rec)
         print(rec, flush=True)
     return out
@@ -163,8 +170,20 @@ def figure(ph, psis, gaps, path):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--costs-only", action="store_true",
+                    help="measure the costs only and merge them into the existing results")
     args = ap.parse_args(argv)
     q = args.quick
+    if args.costs_only:
+        suffix = "_quick" if q else ""
+        path = os.path.join(HERE, "results", f"contact{suffix}.json")
+        res = json.load(open(path))
+        meta = res.pop("meta")
+        res["costs"] = costs([24] if q else [48, 100])
+        with open(path, "w") as f:
+            json.dump(dict(meta=meta, **res), f, indent=1)
+        write_md(meta, res, os.path.join(HERE, "results", f"contact{suffix}.md"), suffix)
+        return
     t_start = time.perf_counter()
     n = 24 if q else 48
     res = dict(costs=costs([24] if q else [48, 100]))
@@ -209,14 +228,15 @@ def write_md(meta, res, path, suffix):
          "Contact: thickness 0.01 L, stiffness 1e5 B/L^3, exclusion 0.1 L (`jaxrod.Contact()`).", "",
          "## Cost", "",
          "| N | Hessian (ms) contact / free | Newton step (ms) contact / free | stability count (ms) contact / free "
-         "| snap_angles run (s) contact / free | its compile (s) contact / free |",
-         "|---|---|---|---|---|---|"]
+         "| snap_angles run (s) contact / free | its compile (s) contact / free | brink snap (s) contact / free |",
+         "|---|---|---|---|---|---|---|"]
     for c in res["costs"]:
         L.append(f"| {c['n']} | {c['hessian_ms_contact']:.2f} / {c['hessian_ms_free']:.3f} "
                  f"| {c['newton_step_ms_contact']:.2f} / {c['newton_step_ms_free']:.3f} "
                  f"| {c['stability_count_ms_contact']:.2f} / {c['stability_count_ms_free']:.3f} "
                  f"| {c['snap_angles_s_contact']:.3f} / {c['snap_angles_s_free']:.3f} "
-                 f"| {c['snap_angles_compile_s_contact']:.1f} / {c['snap_angles_compile_s_free']:.1f} |")
+                 f"| {c['snap_angles_compile_s_contact']:.1f} / {c['snap_angles_compile_s_free']:.1f} "
+                 f"| {_f(c.get('snap_s_contact'), '{:.2f}')} / {_f(c.get('snap_s_free'), '{:.2f}')} |")
     L += ["", "## Snap angles and brink snap speeds with and without contact", "",
           "| Psi0 | G/L | contact | alpha_c up (deg) | kind, result | clearance | v_s up | alpha_c down (deg) "
           "| kind, result | clearance | v_s down |", "|---|---|---|---|---|---|---|---|---|---|---|"]
