@@ -137,9 +137,28 @@ def penalty(d, thickness, stiffness):
     return stiffness * thickness / 3.0 * u**3
 
 
+def _smoothstep(x):
+    """0 below 0, 1 above 1, the quintic 6x^5 - 15x^4 + 10x^3 between (C2)."""
+    x = jnp.clip(x, 0.0, 1.0)
+    return x**3 * (10.0 + x * (-15.0 + 6.0 * x))
+
+
+def window(t):
+    r"""$\psi(t)=S(t+\tfrac12)-S(t-\tfrac12)$: 1 at the middle of a segment,
+    $\tfrac12$ at its ends, 0 beyond half a segment past them; consecutive segments' windows
+    sum to 1 along a uniform straight chain."""
+    return _smoothstep(t + 0.5) - _smoothstep(t - 0.5)
+
+
 def _pair_energy(z, thickness, stiffness):
-    """phi of the distance from node z[0:2] to the segment [z[2:4], z[4:6]]."""
-    return penalty(_point_segment(z[0:2], z[2:4], z[4:6]), thickness, stiffness)
+    r"""$\psi(t)\,\varphi(d_\perp)$ of node z[0:2] and the segment [z[2:4], z[4:6]]: $t$ the
+    node's projection parameter on the segment, $d_\perp$ its distance to the segment's line."""
+    p, a, b = z[0:2], z[2:4], z[4:6]
+    u = b - a
+    l2 = jnp.sum(u**2)
+    t = jnp.sum((p - a) * u) / l2
+    d = jnp.abs(_cross(u, p - a)) / jnp.sqrt(l2)
+    return window(t) * penalty(d, thickness, stiffness)
 
 
 def _voronoi(d):

@@ -204,11 +204,13 @@ class Contact(eqx.Module):
     r"""Self-contact of the strip: a smooth penalty between parts of the strip that are not
     neighbours, active where they come within the contact thickness $\delta$ of each other.
 
-    Node $p$ (Voronoi length $w_p$) and segment $j$ at distance $d_{pj}$ (closest point of
-    the segment) interact when segment $j$ lies entirely more than `exclusion` $\cdot L$ of
-    arclength away from node $p$; the energy is
+    Node $p$ (Voronoi length $w_p$) and segment $j$ interact when segment $j$ lies entirely
+    more than `exclusion` $\cdot L$ of arclength away from node $p$; with $d_{pj}$ the node's
+    distance from the segment's line and $\psi(t_{pj})$ a smooth window in its projection
+    parameter along the segment (1 over its middle, 0 half a segment past its ends, summing to
+    1 over consecutive segments; `jaxrod.energy.contact.window`), the energy is
 
-    $$E_c=\sum_p w_p\sum_j \varphi(d_{pj}),\qquad
+    $$E_c=\sum_p w_p\sum_j \psi(t_{pj})\,\varphi(d_{pj}),\qquad
     \varphi(d)=\frac{k\delta}{3}\Big(1-\frac d\delta\Big)^3\ (d<\delta),\quad 0\ (d\ge\delta),$$
 
     so $\varphi,\varphi',\varphi''$ all vanish at $d=\delta$: a contact that opens or
@@ -221,8 +223,8 @@ class Contact(eqx.Module):
       centrelines touch, i.e. the strip's thickness $t$ when physical units are used
       (`Contact.for_strip(strip, thickness=t)` for a strip in SI units)
       (PET strips of the paper: $t/L\approx 4\cdot10^{-4}$-$1.3\cdot10^{-3}$). A
-      thickness below the mesh size $h$ is allowed (the node-to-segment distance cannot
-      tunnel) but the penalty's stiffness $2k/\delta$ then sets the dynamics' step.
+      thickness below the mesh size $h$ is allowed (no step passes a node through a segment)
+      but the penalty's stiffness $2k/\delta$ then sets the dynamics' step.
     - `stiffness` $k$ (default $10^5\,B/L^3$): a node pressed with $f=10^3\,B/L^3$ sinks to
       $0.9\,\delta$.
     - `exclusion` (static, fraction of L; default 0.1): parts of the strip closer than this
