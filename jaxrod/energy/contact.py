@@ -192,8 +192,6 @@ def inextensible_nodes(theta, d):
 
 def contact_energy(theta, scene, d=None):
     r"""$E_c$ of the angles `theta` (N,) (inextensible positions; 0 without contact)."""
-    if scene.contact is None:
-        return jnp.zeros((), theta.dtype)
     if d is None:
         d = discretize(scene)
     return contact_energy_nodes(inextensible_nodes(theta, d), scene, d)
