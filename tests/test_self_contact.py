@@ -51,17 +51,19 @@ def test_no_force_while_clear():
     """A state whose contact pairs are all farther apart than delta feels no contact energy or
     force: results without contact are unchanged wherever the clearance stays above it."""
     sc = _scene(gap=0.5)
-    th = jnp.asarray(jr.initial_state(_scene(gap=0.5, contact=False), "up").theta)
+    f = np.asarray(sc.mesh.fractions)
+    th = jnp.asarray(1.2 * np.sin(2 * np.pi * 0.5 * (f[1:] + f[:-1])))  # an arch, far from itself
+    assert float(jr.clearance(th, sc, min_separation=3)) > 0.05
     assert float(C.contact_energy(th, sc)) == 0.0
     assert float(jnp.max(jnp.abs(jax.grad(C.contact_energy)(th, sc)))) == 0.0
 
 
 @pytest.mark.parametrize("thickness", [0.01, 0.3])
-def test_hessian_against_autodiff(thickness):
+def test_hessian_against_autodiff(thickness, pressed):
     """The suffix-sum Hessian equals autodiff's, both with few pairs in contact (the closest
     K are assembled) and with more than K (all are)."""
     sc = _scene(thickness=thickness, stiffness=10.0)
-    th = _angles(0) if thickness > 0.1 else jr.initial_state(_scene(), "up").theta
+    th = _angles(0) if thickness > 0.1 else pressed.theta
     H1 = jax.hessian(C.contact_energy)(th, sc)
     H2 = C.contact_hessian(th, sc)
     assert float(jnp.max(jnp.abs(H1))) > 0.0
@@ -70,7 +72,7 @@ def test_hessian_against_autodiff(thickness):
 
 def test_gradient_and_hessian_of_the_lagrangian(pressed):
     """The written-out gradient with contact against autodiff of the scalar Lagrangian and
-    against central differences; the dense structured Hessian against autodiff's."""
+    against central differences; the structured Hessian is the dense form."""
     sc = pressed.scene
     assert float(C.contact_energy(pressed.theta, sc)) > 0.0  # contact is active here
     th, mu = pressed.theta + 1e-3 * _angles(1), pressed.force
@@ -81,8 +83,17 @@ def test_gradient_and_hessian_of_the_lagrangian(pressed):
     e = jnp.zeros(N + 2).at[3].set(1.0)
     fd = (L(z + 1e-6 * e) - L(z - 1e-6 * e)) / 2e-6
     assert float(g[3]) == pytest.approx(float(fd), rel=1e-6, abs=1e-8)
+    assert isinstance(kkt.structured(th, mu, sc), kkt.BorderedDense)
+
+
+@pytest.mark.slow  # 10 s of compile: the contact part alone is checked in CI (test_hessian_against_autodiff)
+def test_structured_hessian_of_the_lagrangian(pressed):
+    """The dense structured Hessian with contact against autodiff's of the scalar Lagrangian."""
+    sc = pressed.scene
+    th, mu = pressed.theta + 1e-3 * _angles(1), pressed.force
+    z = jnp.concatenate([th, mu])
+    L = lambda z: lagrangian(z[:N], z[N:], sc)  # noqa: E731
     K = kkt.structured(th, mu, sc)
-    assert isinstance(K, kkt.BorderedDense)
     np.testing.assert_allclose(np.asarray(K.dense()), np.asarray(jax.hessian(L)(z)), atol=1e-9)
 
 
@@ -158,6 +169,7 @@ def test_pressed_state(pressed):
     assert float(jr.stability(eq).eigenvalues[0]) > 0.0
 
 
+@pytest.mark.slow  # 10 s; CI presses the flat strip at G/L = 0.1 (test_pressed_state) and fuzzes the steps
 def test_pressed_states_never_cross():
     """Fuzz: up and down states at gaps 0.04-0.14 and clamp angles within +-30 deg, with
     contact: every one found is a stable equilibrium that does not pass through itself."""
@@ -268,6 +280,7 @@ def _cli(args, capsys):
     return code, *capsys.readouterr()
 
 
+@pytest.mark.slow  # 7 s: compiles the CLI's programs with and without contact
 def test_cli_contact_by_default_where_needed(capsys):
     """`jaxrod equilibrium` at G/L = 0.1: by default contact is switched on because the
     contact-free state passes through itself; `--no-contact` reports that state flagged."""
