@@ -1,4 +1,4 @@
-r"""Self-contact check: the clearance between non-neighbouring segments of the strip.
+r"""Self-contact: the clearance between non-neighbouring segments of the strip, and the contact energy.
 
 Segment $i$ ($i=0..N-1$) is the closed line segment $[\mathbf x_i,\mathbf x_{i+1}]$
 between nodes $\mathbf x_k=\sum_{i<k}h_i(1+\varepsilon_i)\mathbf t_i$,
@@ -44,6 +44,33 @@ monotone along $\mathbf d$ and segments $i<j-1$ are at least $p_{i+1}>$ `tol` ap
 $\mathbf d$: no crossing, clearance above `tol`. (Any $\mathbf d$ would do; the midpoint makes
 the screen pass whenever the angle range is below $\pi$ and the mesh is not too fine.) Only
 states that fail the screen pay for the $O(N^2)$ pair check.
+
+**Contact energy.** With `scene.contact` (a `jaxrod.Contact`), node $p$ and segment $j$
+interact when segment $j$ lies more than `exclusion` $\cdot L$ of arclength from node $p$
+([`contact_pairs`][], fixed at trace time); the energy is
+$E_c=\sum_{(p,j)}w_p\,\psi(t_{pj})\,\varphi(d_{pj})$ with $w_p$ the node's Voronoi length, the
+cubic penalty $\varphi$ of `jaxrod.Contact`, $d_{pj}$ the distance of node $p$ from the line
+of segment $j$ and $t_{pj}$ its projection parameter along the segment (0 and 1 at its
+ends), weighted by the smooth window $\psi$ ([`window`][]: 1 at the segment's middle, 1/2
+at its ends, 0 half a segment beyond them), whose values for consecutive segments of a
+straight uniform chain sum to 1. So the energy is twice continuously differentiable. The
+distance to the closest point of a segment would switch from the line to an end point at
+the segment's ends: a jump of its Hessian, which would make the constrained stiffness jump
+past zero (a loss of stability that no eigenvalue passes through smoothly, to which a
+critical-point refinement cannot converge). The first contact of two parts of a chain is a
+node meeting a segment, and the windows cover every point of the chain; the solvers' steps
+are bounded by [`step_bound`][] with the true distances, so no step carries a node through
+a segment. In the angles, with $\mathbf x_k=\sum_{i<k}h_i\mathbf t_i$ and
+$\mathbf n_i=\mathbf t_i^\perp$,
+
+$$\frac{\partial E_c}{\partial\theta_i}=h_i\mathbf n_i\cdot\mathbf G_{i+1},\qquad
+\frac{\partial^2E_c}{\partial\theta_i\partial\theta_j}=h_ih_j\,\mathbf n_i^\top\mathsf S_{i+1,j+1}\mathbf n_j
+-\delta_{ij}\,h_i\mathbf t_i\cdot\mathbf G_{i+1},$$
+
+$\mathbf G_k=\sum_{k'\ge k}\partial E_c/\partial\mathbf x_{k'}$ and
+$\mathsf S_{kl}=\sum_{k'\ge k,l'\ge l}\partial^2E_c/\partial\mathbf x_{k'}\partial\mathbf x_{l'}$ (suffix
+sums); the Cartesian Hessian is assembled from each pair's $6\times6$ Hessian
+([`contact_hessian`][]: $O(N^2)$ work, a dense $N\times N$ result).
 """
 
 from __future__ import annotations
