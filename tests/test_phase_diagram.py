@@ -17,7 +17,7 @@ from jaxrod.branches import _phase
 def _fake_chunk(calls):
     """Stand-in for the compiled chunk: deterministic values, and a record of each call."""
 
-    def f(psi0, gaps, s0, mesh):
+    def f(psi0, gaps, s0, mesh, contact=None):
         calls.append(float(psi0))
         g = np.asarray(gaps)
         p = float(psi0)
@@ -139,7 +139,7 @@ def test_cli_json(tmp_path, monkeypatch, capsys):
     # every point successful: exit 0
     ok = int(jr.RESULTS.successful._value)
 
-    def all_ok(psi0, gaps, s0, mesh):
+    def all_ok(psi0, gaps, s0, mesh, contact=None):
         d = _fake_chunk([])(psi0, gaps, s0, mesh)
         for k in ("start_up", "start_down", "result_up", "result_down"):
             d[k] = np.full(np.asarray(gaps).size, ok, np.int32)
@@ -188,7 +188,7 @@ def test_warm_started_chunk_equals_single_calls(chunks):
     assert int(warm.sel(psi0=30.0, gap=0.8)) == 1 and int(warm.sel(psi0=30.0, gap=0.82)) == 1
 
 
-def _traced_fake_chunk(psi0, gaps, s0, mesh, settings=None):
+def _traced_fake_chunk(psi0, gaps, s0, mesh, settings=None, contact=None):
     """A traceable stand-in for the compiled chunk (deterministic values; one NaN angle)."""
     import jax.numpy as jnp
 
@@ -248,7 +248,7 @@ def test_vmap_mode_computes_missing_chunks_in_one_call(tmp_path, monkeypatch):
     fake = _fake_chunk(calls)
     monkeypatch.setattr(_phase, "_chunk", fake)
 
-    def grid(psis, gaps, s0, mesh):
+    def grid(psis, gaps, s0, mesh, contact=None):
         grid_calls.append([float(p) for p in psis])
         outs = [fake(p, gaps, s0, mesh) for p in psis]
         return {k: np.stack([o[k] for o in outs]) for k in outs[0]}

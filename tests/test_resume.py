@@ -155,7 +155,7 @@ def test_phase_diagram_sigkill_resume(tmp_path):
 def _fake_chunk(calls):
     """Stand-in for the compiled chunk (as in test_phase_diagram): deterministic values."""
 
-    def f(psi0, gaps, s0, mesh):
+    def f(psi0, gaps, s0, mesh, contact=None):
         calls.append(round(float(np.degrees(psi0)), 9))
         g = np.asarray(gaps)
         out = {k: np.sin(float(psi0) * (i + 1) + 3.0 * g) for i, k in enumerate(_phase.VARIABLES)}

@@ -174,8 +174,8 @@ def _resolve_batch(batch):
 @functools.lru_cache(maxsize=8)
 def _sharded(mesh, settings, devices, per_device, mode, contact=None):
     """One `ShardedMap` of `_chunk` per mesh and split (so repeated calls reuse its compilation)."""
-    kw = {} if contact is None else {"contact": contact}
-    return ShardedMap(lambda psi0, shared: _chunk(psi0, shared[0], shared[1], mesh, settings=settings, **kw),
+    return ShardedMap(lambda psi0, shared: _chunk(psi0, shared[0], shared[1], mesh, settings=settings,
+                                                  contact=contact),
                       devices=devices, per_device=per_device, mode=mode)
 
 
@@ -288,7 +288,7 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     if batch == "vmap" and todo:
         # one call for every chunk still missing (the finished ones were read back above)
         vals = jax.device_get(_grid(jnp.asarray([math.radians(p) for p in todo], jnp.float64), g_arr, s0_arr, mesh,
-                                     **({} if ckey is None else {"contact": ckey})))
+                                     contact=ckey))
         batched = {p: {k: v[i] for k, v in vals.items()} for i, p in enumerate(todo)}
     sharded = None
     if batch == "shard":
@@ -309,8 +309,8 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
                 batched.update({q: {k: v[i] for k, v in vals.items()} for i, q in enumerate(left)})
             vals = batched.pop(p, None)
             if vals is None:
-                kw = {} if ckey is None else {"contact": ckey}
-                vals = jax.device_get(_chunk(jnp.asarray(math.radians(p), jnp.float64), g_arr, s0_arr, mesh, **kw))
+                vals = jax.device_get(_chunk(jnp.asarray(math.radians(p), jnp.float64), g_arr, s0_arr, mesh,
+                                             contact=ckey))
             ds = _chunk_dataset(p, gaps, vals, attrs)
             if out is not None and lead:
                 _write(ds, _chunk_path(out, p))

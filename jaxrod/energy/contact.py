@@ -197,6 +197,11 @@ def _pair_coordinates(x, p, j):
     return jnp.concatenate([x[p], x[j], x[j + 1]], -1)  # (P, 6)
 
 
+def _node_segment_distances(z):
+    """Distance from node z[:, 0:2] to the closest point of segment [z[:, 2:4], z[:, 4:6]], (P,)."""
+    return _point_segment(z[:, 0:2], z[:, 2:4], z[:, 4:6])
+
+
 def contact_energy_nodes(x, scene, d=None):
     r"""$E_c$ of node positions `x` (N+1, 2) under `scene.contact` (0 without contact)."""
     if scene.contact is None:
@@ -242,7 +247,7 @@ def step_bound(theta, step, scene, d=None, margin=0.9):
     if p.size == 0:
         return jnp.ones((), theta.dtype)
     x = inextensible_nodes(theta, d)
-    dist = jax.vmap(lambda z: _point_segment(z[0:2], z[2:4], z[4:6]))(_pair_coordinates(x, p, j))
+    dist = _node_segment_distances(_pair_coordinates(x, p, j))
     P = jnp.concatenate([jnp.zeros(1, theta.dtype), jnp.cumsum(d.h * jnp.abs(step))])
     B = jnp.maximum(jnp.abs(P[p] - P[j]), jnp.abs(P[p] - P[j + 1]))
     ok = (dist > 0) & (B > 0)
@@ -277,7 +282,7 @@ def contact_hessian(theta, scene, d=None):
 
     K = min(max(64, 2 * N), p.size)
     if K < p.size:
-        dist = jax.vmap(lambda q: _point_segment(q[0:2], q[2:4], q[4:6]))(z)
+        dist = _node_segment_distances(z)
         near = jax.lax.top_k(-dist, K)[1]
         many = jnp.sum(dist < c.thickness) > K
         Hx = jax.lax.cond(many, lambda: assemble(jnp.arange(p.size)), lambda: assemble(near))
