@@ -95,6 +95,16 @@ from .branches import termination_gap as termination_gap
 from .branches import TerminationGap as TerminationGap
 
 # dynamics: equations of motion, integrators, scenes, snap speed
+from .dynamics import ACTUATOR_DAMPING as ACTUATOR_DAMPING
+from .dynamics import Actuation as Actuation
+from .dynamics import actuate as actuate
+from .dynamics import Ball as Ball
+from .dynamics import Bodies as Bodies
+from .dynamics import damping_from_ringdown as damping_from_ringdown
+from .dynamics import Floor as Floor
+from .dynamics import hold_and_move as hold_and_move
+from .dynamics import Program as Program
+from .dynamics import Table as Table
 from .dynamics import brink as brink
 from .dynamics import Dissipation as Dissipation
 from .dynamics import Protocol as Protocol

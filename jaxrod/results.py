@@ -102,6 +102,11 @@ class RESULTS(eqx.Enumeration):
         "so whether the path snaps is unknown. Rerun with a smaller Continuation(ds_max), or use "
         "termination_gap, which solves the cusp."
     )
+    object_penetrated = (
+        "A body went through its contact layer (a gap to the strip, another body or the floor fell below "
+        "zero): the impact is too fast for the contact law. Raise Bodies(stiffness=...) or thickness, or "
+        "slow the program."
+    )
 
 
 def result_name(code) -> str:

@@ -98,6 +98,8 @@ def test_snap_speed_gradient_in_the_design_loop_matches_central_differences():
     assert np.all(np.abs(J[0]) > 1.0)
 
 
+@pytest.mark.slow  # 41 s on 2 cores; CI checks the same derivative (d v_s / d(Psi0, G, s0) through the
+# implicit start state and the checkpointed run) in test_dynamics_physics.py
 def test_snap_speed_gradient_matches_central_differences():
     """d v_s / d(Psi0, G, s0) of jr.snap_speed by jax.jacfwd (custom JVP: one reverse pass
     through the implicitly differentiated critical state and the fixed-step run) vs central

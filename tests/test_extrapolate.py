@@ -76,12 +76,15 @@ def test_combination_and_fallback():
 
 
 def test_cli_default_is_extrapolated(capsys):
-    from jaxrod.cli._main import main
+    """`jaxrod snap-angles` extrapolates by default, from N and 2N (N = 100 unless --n):
+    checked at N = 24 (the default mesh runs the same programs at another size)."""
+    from jaxrod.cli._main import DEFAULTS, main
 
-    assert main(["snap-angles", "--psi0", "60", "--gap", "0.5", "--json"]) == 0
+    assert DEFAULTS["n"] == 100
+    assert main(["snap-angles", "--psi0", "60", "--gap", "0.5", "--n", "24", "--json"]) == 0
     rec = json.loads(capsys.readouterr().out)
-    x = jr.snap_angles_extrapolated(jr.make_scene(60.0, 0.5, 0.0, n=100))
-    assert rec["extrapolated"] is True and rec["n"] == 100 and rec["n_fine"] == 200
+    x = jr.snap_angles_extrapolated(jr.make_scene(60.0, 0.5, 0.0, n=24))
+    assert rec["extrapolated"] is True and rec["n"] == 24 and rec["n_fine"] == 48
     for name in ("up", "down"):
         e = getattr(x, name)
         assert abs(rec[f"alpha_c_{name}_deg"] - math.degrees(float(e.alpha_c))) < 1e-9
@@ -95,7 +98,7 @@ def test_cli_default_is_extrapolated(capsys):
         assert e.result == ok and e.result_coarse == ok and e.result_fine == ok and bool(e.consistent)
     # the down state does not exist at alpha = 0 at (30 deg, 0.8): the up path starts from the
     # snap-down path's end, which the CLI prints and flags with exit code 3
-    assert main(["snap-angles", "--psi0", "30", "--gap", "0.8", "--json"]) == 3
+    assert main(["snap-angles", "--psi0", "30", "--gap", "0.8", "--n", "24", "--json"]) == 3
     rec = json.loads(capsys.readouterr().out)
     assert rec["alpha_c_up_deg"] is None and rec["kind_up"] == "none"
     assert rec["result_up"] == "successful" and rec["result_down"] == "successful"

@@ -59,6 +59,7 @@ def test_ringing_flat_strip():
     _check_ringing(50, 6.0, 1e-2, psi0=180.0)
 
 
+@pytest.mark.slow  # 29 s on 2 cores; CI flags huge steps in test_properties.py (test_huge_step_is_flagged)
 def test_too_large_a_step_is_flagged():
     """The snap's own step (courant 0.45) carried past the slam: before, energies of 1e27
     with a successful result; now the run stops within ~0.15 T of the crossing with a code."""

@@ -97,6 +97,36 @@ def angles(x, v, theta_ref):
     return th, om
 
 
+def shake(x0, v0, f0, mu, invm, h, dt, iters, tol):
+    r"""RATTLE's position update: $\mathbf x_1=\mathbf x_0+\Delta t\mathbf v_0+\tfrac{\Delta t^2}2M^{-1}
+    (\mathbf f_0-G_0^\top\mu)$ with $\mu$ solving every link's length $g(\mathbf x_1)=0$ by
+    `iters` Newton iterations on its tridiagonal Jacobian, warm-started from `mu`. Returns
+    `(x1, mu, converged)`, `converged` when every link's residual $|g_i|/h_i^2$ is below `tol`
+    (False for NaN)."""
+    c = 0.5 * dt**2
+    xh = x0 + dt * v0 + c * invm[:, None] * f0
+    dx0 = jnp.diff(x0, axis=0)
+    h2 = h**2
+    z = jnp.zeros(1, x0.dtype)
+
+    def x_of(mu):
+        return xh - c * invm[:, None] * _spread(mu, dx0)
+
+    def newton(_, mu):
+        dx1 = jnp.diff(x_of(mu), axis=0)
+        r = 0.5 * (jnp.sum(dx1 * dx1, -1) - h2)
+        diag = -c * (invm[:-1] + invm[1:]) * jnp.sum(dx1 * dx0, -1)
+        up = c * invm[1:-1] * jnp.sum(dx1[:-1] * dx0[1:], -1)
+        lo = c * invm[1:-1] * jnp.sum(dx1[1:] * dx0[:-1], -1)
+        return mu - _tri(jnp.concatenate([z, lo]), diag, jnp.concatenate([up, z]), r)
+
+    mu = lax.fori_loop(0, iters, newton, mu, unroll=True)
+    x1 = x_of(mu)
+    dx1 = jnp.diff(x1, axis=0)
+    residual = jnp.max(jnp.abs(0.5 * (jnp.sum(dx1 * dx1, -1) - h2)) / h2)
+    return x1, mu, residual < tol
+
+
 class Rattle(dfx.AbstractSolver):
     """RATTLE for jaxrod's strip (module docstring). Needs `simulate`'s `args`
     `(scene, protocol, dissipation, baumgarte, d)`; `baumgarte` is unused (the end
@@ -152,28 +182,7 @@ class Rattle(dfx.AbstractSolver):
         x0, v0, th0, f0, p0, mu = solver_state
         invm = inverse_node_mass(d)
         dt = t1 - t0
-        c = 0.5 * dt**2
-        xh = x0 + dt * v0 + c * invm[:, None] * f0
-        dx0 = jnp.diff(x0, axis=0)
-        h2 = d.h**2
-        z = jnp.zeros(1, x0.dtype)
-
-        def x_of(mu):
-            return xh - c * invm[:, None] * _spread(mu, dx0)
-
-        def newton(_, mu):
-            dx1 = jnp.diff(x_of(mu), axis=0)
-            r = 0.5 * (jnp.sum(dx1 * dx1, -1) - h2)
-            diag = -c * (invm[:-1] + invm[1:]) * jnp.sum(dx1 * dx0, -1)
-            up = c * invm[1:-1] * jnp.sum(dx1[:-1] * dx0[1:], -1)
-            lo = c * invm[1:-1] * jnp.sum(dx1[1:] * dx0[:-1], -1)
-            return mu - _tri(jnp.concatenate([z, lo]), diag, jnp.concatenate([up, z]), r)
-
-        mu = lax.fori_loop(0, self.shake_iters, newton, mu, unroll=True)
-        x1 = x_of(mu)
-        dx1 = jnp.diff(x1, axis=0)
-        residual = jnp.max(jnp.abs(0.5 * (jnp.sum(dx1 * dx1, -1) - h2)) / h2)
-        converged = residual < self.shake_tol  # False for NaN too
+        x1, mu, converged = shake(x0, v0, f0, mu, invm, d.h, dt, self.shake_iters, self.shake_tol)
         vh = (x1 - x0) / dt
         th1, omh = angles(x1, vh, th0)
         f1, p1 = rattle_forces(t1, th1, omh, x1, vh, args)

@@ -90,21 +90,21 @@ def _cross(u, v):
     return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
 
-def _norm(v):
+def safe_norm(v):
     """|v| along the last axis with a finite gradient at v = 0 (double `where`); NaN stays NaN."""
     s2 = jnp.sum(v**2, -1)
     zero = s2 == 0
     return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, s2)))
 
 
-def _point_segment(p, a, b):
+def point_segment_distance(p, a, b):
     r"""$|\mathbf p-\text{closest point of }[\mathbf a,\mathbf b]|$ (a point for $\mathbf a=\mathbf b$)."""
     u = b - a
     l2 = jnp.sum(u**2, -1)
     zero = l2 == 0
     t = jnp.where(zero, 0.0, jnp.sum((p - a) * u, -1) / jnp.where(zero, 1.0, l2))
     t = jnp.clip(t, 0.0, 1.0)
-    return _norm(p - a - t[..., None] * u)
+    return safe_norm(p - a - t[..., None] * u)
 
 
 def _intersect(a, b, c, d):
@@ -126,8 +126,8 @@ def pair_distances(x, min_separation: int = 2):
     i, j = np.triu_indices(n, k=min_separation)
     a, b, c, d = x[..., i, :], x[..., i + 1, :], x[..., j, :], x[..., j + 1, :]
     crosses = _intersect(a, b, c, d)
-    dist = jnp.minimum(jnp.minimum(_point_segment(a, c, d), _point_segment(b, c, d)),
-                       jnp.minimum(_point_segment(c, a, b), _point_segment(d, a, b)))
+    dist = jnp.minimum(jnp.minimum(point_segment_distance(a, c, d), point_segment_distance(b, c, d)),
+                       jnp.minimum(point_segment_distance(c, a, b), point_segment_distance(d, a, b)))
     return i, j, jnp.where(crosses, 0.0, dist), crosses
 
 
@@ -199,7 +199,7 @@ def _pair_coordinates(x, p, j):
 
 def _node_segment_distances(z):
     """Distance from node z[:, 0:2] to the closest point of segment [z[:, 2:4], z[:, 4:6]], (P,)."""
-    return _point_segment(z[:, 0:2], z[:, 2:4], z[:, 4:6])
+    return point_segment_distance(z[:, 0:2], z[:, 2:4], z[:, 4:6])
 
 
 def contact_energy_nodes(x, scene, d=None):
