@@ -96,6 +96,7 @@ from .branches import TerminationGap as TerminationGap
 
 # dynamics: equations of motion, integrators, scenes, snap speed
 from .dynamics import ACTUATOR_DAMPING as ACTUATOR_DAMPING
+from .dynamics import ACTUATOR_VISCOSITY as ACTUATOR_VISCOSITY
 from .dynamics import Actuation as Actuation
 from .dynamics import actuate as actuate
 from .dynamics import Ball as Ball

@@ -12,6 +12,7 @@ Layer: above branches (a brink starts from a snap angle); below design.
 """
 
 from ._actuate import ACTUATOR_DAMPING as ACTUATOR_DAMPING
+from ._actuate import ACTUATOR_VISCOSITY as ACTUATOR_VISCOSITY
 from ._actuate import Actuation as Actuation
 from ._actuate import actuate as actuate
 from ._actuate import damping_from_ringdown as damping_from_ringdown

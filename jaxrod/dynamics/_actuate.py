@@ -13,9 +13,10 @@ the coupled step stays symplectic when undamped. Dissipative forces (the strip's
 the table's friction) are evaluated at the half-step velocities as in `simulate`.
 
 **Step.** $\Delta t=\min(\text{courant}\,h_{\min}^2,\ 2\cdot10^{-4},\ 0.2/\omega_b)$ in units of
-$T$, $\omega_b=\sqrt{2k/(\delta\,m)}$ the frequency of the stiffest contact ($m$ the smallest
-of the balls' masses and the strip's node masses): the contact's own oscillation is resolved
-with about 30 steps.
+$T$, $\omega_b$ the frequency of the stiffest contact (`_body_omega`): the contact's own
+oscillation is resolved with about 30 steps. Measured (one snap up, $\Psi_0=60^\circ$, $G/L=0.5$, N = 24, a ball of
+mass 0.05 $\lambda L$ launched at 26.0 $v^*$, undamped): energy error 9.3e-3 / 2.7e-3 / 5.8e-4 /
+2.0e-4 at 0.4 / 0.2 / 0.1 / 0.05 $/\omega_b$, launch speed within 4e-5 of the finest at 0.2.
 
 **Bookkeeping** (one sample per diffrax step of `substeps` RATTLE steps):
 
@@ -23,8 +24,9 @@ with about 30 steps.
   $V$ the strip's potential (bending, gravity, self-contact), $E_c$ the bodies' contact,
   floor and gravity energy, $W$ the clamps' work (trapezoidal rule on their power
   $\partial_{\alpha_L}V\dot\alpha_L+\partial_{\alpha_R}V\dot\alpha_R$) and $D$ the energy
-  dissipated (trapezoidal rule on the power of the damping, drag, hinge viscosity and table
-  friction). `energy_error` is $\max_t|E(t)-E(0)|$ over $\max(|E(0)|,\max_t|W|,\max_tD,B/L)$;
+  dissipated (trapezoidal rule on the power the strip and the balls lose to the damping, drag,
+  hinge viscosity and table friction; for the viscosity that is the Rayleigh dissipation $2R$
+  less the power the turning clamps feed their own hinges' viscous moments). `energy_error` is $\max_t|E(t)-E(0)|$ over $\max(|E(0)|,\max_t|W|,\max_tD,B/L)$;
 * the impulse $\mathbf J_m(t)=\int_0^t\mathbf F_m\,dt$ the strip gives each ball, by the same
   trapezoidal rule as the ball's velocity update, so that $M_m(\mathbf v_m-\mathbf v_m(0))=\mathbf J_m$
   when nothing else touches the ball;
@@ -53,12 +55,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._bodies import (Bodies, body_clearance, body_energy, friction_force, strip_body_energy,
+from ._bodies import (Bodies, body_clearance, body_energy, friction_force, quadrature_points, strip_body_energy,
                       strip_clearance)
 from ._equations import Dissipation, check_scene, inverse_node_mass, kinematics, kinetic_energy, potential_energy, scene_at
 from ._program import Program
 from ._rattle import angles, project_velocity, rattle_forces, shake
 from ._simulate import DT_CAP
+from ..energy.contact import safe_norm
 from ..energy.geometry import discretize, scene_dtype
 from ..results import RESULTS
 from .._misc import check_int, check_number
@@ -67,10 +70,16 @@ from .._misc import check_int, check_number
 BODY_COURANT = 0.2
 """The step is at most BODY_COURANT / omega_b (see the module docstring)."""
 ACTUATOR_DAMPING = 1.0
-r"""Default viscous damping $\gamma$ of `actuate` (1/T): the strip's fundamental ring-down
-decays as $e^{-\gamma t/2}$, to 1/e in 2 T, so that a program's holds of a few T let the strip
-settle between snaps while a snap itself (about 0.05 T) loses about 2 % of its speed.
-Calibrate it for a real strip with `damping_from_ringdown`."""
+r"""Default viscous damping $\gamma$ of `actuate` (1/T): the strip's ring-down decays as
+$e^{-\gamma t/2}$, to 1/e in 2 T, so that holds of a few T let the strip settle between
+snaps. Calibrate it for a real strip with `damping_from_ringdown`."""
+ACTUATOR_VISCOSITY = 1e-2
+r"""Default hinge viscosity $\eta$ of `actuate` ($B\,T$): it damps the grid-scale bending
+modes that ring after a snap. Without it a ball's launch speed depends on the phase of that
+ringing at the hit: measured at $\Psi_0=60^\circ$, $G/L=0.5$, N = 16, the launch speed
+wiggles by 3e-4 $v^*$ over 1e-4 rad of a clamp knot, so its derivative swings by $\pm20$
+per rad about a trend of 3, and a gradient is useless for design; with it the launch speed is
+smooth on that scale and 9 % lower (22.28 against 24.48 $v^*$)."""
 
 
 def _dissipated_power(t, omega, v, vb, args):
@@ -80,20 +89,23 @@ def _dissipated_power(t, omega, v, vb, args):
     m = d.node_mass
     s2 = jnp.sum(v**2, -1)
     lam = scene.strip.line_density
-    p = dissipation.damping * jnp.sum(m * s2) + dissipation.drag * jnp.sum((m / lam) * s2 * jnp.sqrt(s2))
+    p = dissipation.damping * jnp.sum(m * s2) + dissipation.drag * jnp.sum((m / lam) * s2 * safe_norm(v))
     _, _, rL, rR = program.angles(t)
     full_rate = jnp.concatenate([rL[None], omega, -rR[None]])
-    phidot = jnp.diff(full_rate)
-    p = p + jnp.sum(dissipation.viscosity * phidot**2 / d.ell)
+    tau = dissipation.viscosity * jnp.diff(full_rate) / d.ell  # hinge viscous moments
+    # minus the power of the viscous generalized forces on the angles: 2R less the power the
+    # turning clamps put into their own hinges' viscous moments (those moments are the
+    # clamps' to supply, not the strip's to lose)
+    p = p - jnp.sum((tau[1:] - tau[:-1]) * omega)
     return p - jnp.sum(friction_force(vb, bodies) * vb)
 
 
-def _forces(t, theta, omega, x, v, xb, vb, args):
+def _forces(t, theta, omega, x, v, xb, vb, args, q):
     """Strip node forces, clamp power, ball forces, the strip's force on each ball and the
-    dissipated power."""
+    dissipated power (`q`: the contact's quadrature points per segment)."""
     scene, program, dissipation, bodies, d = args
     f, clamp_power = rattle_forces(t, theta, omega, x, v, (scene, program, dissipation, None, d))
-    gx, gb = jax.grad(strip_body_energy, argnums=(0, 1))(x, xb, bodies)
+    gx, gb = jax.grad(strip_body_energy, argnums=(0, 1))(x, xb, bodies, q)
     fs = -gb
     fb = fs - jax.grad(body_energy)(xb, bodies, scene.gravity) + friction_force(vb, bodies)
     return f - gx, clamp_power, fb, fs, _dissipated_power(t, omega, v, vb, args)
@@ -105,6 +117,7 @@ class RattleBodies(dfx.AbstractSolver):
     positions and velocities (M, 2), impulses (M, 2). `args = (scene, program, dissipation,
     bodies, d)`."""
 
+    quadrature: int = 8
     shake_iters: int = 4
     shake_tol: float = 1e-10
     substeps: int = 1
@@ -122,7 +135,7 @@ class RattleBodies(dfx.AbstractSolver):
         x, v = kinematics(theta, omega, d)
         x = x.at[-1].set(jnp.stack([scene.clamps.gap, jnp.zeros((), x.dtype)]))
         v = project_velocity(x, v.at[-1].set(0.0), invm)
-        f, p, fb, fs, pd = _forces(t0, theta, omega, x, v, xb, vb, args)
+        f, p, fb, fs, pd = _forces(t0, theta, omega, x, v, xb, vb, args, self.quadrature)
         mu = jnp.zeros(theta.shape, theta.dtype)
         return x, v, theta, f, p, fb, fs, pd, mu
 
@@ -154,7 +167,7 @@ class RattleBodies(dfx.AbstractSolver):
         vbh = vb0 + 0.5 * dt * minv[:, None] * fb0
         xb1 = xb0 + dt * vbh
         th1, omh = angles(x1, vh, th0)
-        f1, p1, fb1, fs1, pd1 = _forces(t1, th1, omh, x1, vh, xb1, vbh, args)
+        f1, p1, fb1, fs1, pd1 = _forces(t1, th1, omh, x1, vh, xb1, vbh, args, self.quadrature)
         v1 = project_velocity(x1, vh + 0.5 * dt * invm[:, None] * f1, invm)
         vb1 = vbh + 0.5 * dt * minv[:, None] * fb1
         _, om1 = angles(x1, v1, th1)
@@ -172,7 +185,7 @@ def _no_field(t, y, args):
 
 
 class Actuation(eqx.Module):
-    """A run of `actuate` (see the module docstring).
+    r"""A run of `actuate` (see the module docstring).
 
     Samples `t` (n,): `fold_height`, `height_left`, `height_right` (y at L/4, L/2, 3L/4),
     `kinetic`, `potential` (strip), `ball_kinetic`, `body_energy` (contacts, floor, ball
@@ -181,7 +194,7 @@ class Actuation(eqx.Module):
     `impulse`, and `ball_clearance` (n, M). Frames `t_frames` (F,): `positions` (F, N+1, 2),
     `ball_frames` (F, M, 2). Per ball (M,): `hit`, `t_hit`, `t_release` (NaN if none),
     `impulse_first` (M, 2), `launch_velocity` (M, 2), `launch_speed`, `peak_speed`,
-    `min_clearance`. Scalars: `energy_error`, `num_steps`, `result` ([`jaxrod.RESULTS`][]).
+    `min_clearance`. Scalars: `energy_error`, `strip_mass` ($\lambda L$), `num_steps`, `result` ([`jaxrod.RESULTS`][]).
     `names`: the balls' names."""
 
     t: jax.Array
@@ -214,6 +227,7 @@ class Actuation(eqx.Module):
     peak_speed: jax.Array
     min_clearance: jax.Array
     energy_error: jax.Array
+    strip_mass: jax.Array
     num_steps: jax.Array
     result: RESULTS
     names: tuple = eqx.field(static=True)
@@ -232,36 +246,46 @@ class Actuation(eqx.Module):
                             peak_speed=float(self.peak_speed[m])))
         return sorted(out, key=lambda h: h["time"])
 
-    def snaps(self, *, min_speed=1.0, settle=0.1) -> list[dict]:
-        """The changes of the half-state label (`height_left`, `height_right` signs: "D"/"U",
-        left half first, as in `design`'s actuator study) that persist for at least `settle`:
-        time (the first crossing), `from`, `to`, the halves that flipped, and `kind`: "snap"
-        when the strip's fastest sample within `settle` of the change exceeds `min_speed`
-        (v*; from its kinetic energy, sqrt(2 E_k / (lambda L))), else "drift"."""
+    def snaps(self, *, min_speed=2.0, merge=0.1) -> list[dict]:
+        r"""The strip's changes of state in time order (host-side): snaps and drifts.
+
+        The state is the signs of the heights at $L/4$, $L/2$, $3L/4$ (`height_left`,
+        `fold_height`, `height_right`). Sign changes less than `merge` apart form one event, and
+        an event that ends where it began (a flicker) is dropped. Each event gives `time` (its
+        first change), `from` and `to` (the half-state labels before and after: "D"/"U" for the
+        signs of the left and right quarter heights, left first, as in the design package's
+        actuator study), `halves` (those that flipped), `fold` ("up", "down" or None: the fold's
+        own crossing), `speed` (the strip's largest RMS speed $\sqrt{2E_k/(\lambda L)}$ within
+        `merge` of the event) and `kind`: "snap" when that speed exceeds `min_speed` (v*), else
+        "drift" (a quasi-static crossing of the clamp line)."""
         t = np.asarray(self.t)
         ok = np.isfinite(t)
         t = t[ok]
-        hl, hr = np.asarray(self.height_left)[ok], np.asarray(self.height_right)[ok]
-        ek = np.asarray(self.kinetic)[ok]
-        lab = np.array([("U" if a > 0 else "D") + ("U" if b > 0 else "D") for a, b in zip(hl, hr)])
+        sg = np.stack([np.asarray(self.height_left)[ok] > 0, np.asarray(self.fold_height)[ok] > 0,
+                       np.asarray(self.height_right)[ok] > 0], -1)
+        rms = np.sqrt(2.0 * np.maximum(np.asarray(self.kinetic)[ok], 0.0) / float(self.strip_mass))
+        changes = np.nonzero(np.any(sg[1:] != sg[:-1], -1))[0] + 1
+        groups = []
+        for k in changes:
+            if groups and t[k] - t[groups[-1][1]] < merge:
+                groups[-1][1] = k
+            else:
+                groups.append([k, k])
+
+        def label(x):
+            return ("U" if x[0] else "D") + ("U" if x[2] else "D")
+
         out = []
-        cur, i = lab[0], 0
-        n = lab.size
-        while i < n:
-            if lab[i] == cur:
-                i += 1
+        for a, b in groups:
+            before, after = sg[a - 1], sg[b]
+            if np.array_equal(before, after):
                 continue
-            j = i
-            end = np.searchsorted(t, t[i] + settle)
-            stays = np.all(lab[i:min(end, n)] == lab[i]) and end <= n
-            if stays:
-                win = (t >= t[i] - settle) & (t <= t[i] + settle)
-                speed = float(np.sqrt(2.0 * np.max(ek[win]))) if np.any(win) else 0.0
-                flipped = [side for side, k in (("left", 0), ("right", 1)) if cur[k] != lab[i][k]]
-                out.append({"time": float(t[j]), "from": str(cur), "to": str(lab[i]), "halves": flipped,
-                            "kind": "snap" if speed > min_speed else "drift", "speed": speed})
-                cur = lab[i]
-            i += 1
+            win = (t >= t[a] - merge) & (t <= t[b] + merge)
+            speed = float(np.max(rms[win]))
+            fold = None if before[1] == after[1] else ("up" if after[1] else "down")
+            out.append({"time": float(t[a]), "from": label(before), "to": label(after),
+                        "halves": [side for side, q in (("left", 0), ("right", 2)) if before[q] != after[q]],
+                        "fold": fold, "speed": speed, "kind": "snap" if speed > min_speed else "drift"})
         return out
 
 
@@ -269,39 +293,37 @@ def damping_from_ringdown(t, y):
     r"""The viscous damping $\gamma$ (1/time) of a measured ring-down `y(t)` (a displacement
     of the strip, e.g. its fold height, sampled at times `t` after the last snap).
 
-    Mass-proportional damping $-\gamma\lambda\dot{\mathbf x}$ decays every mode as
-    $e^{-\gamma t/2}$, so $\gamma=-2s$, $s$ the slope of $\ln$ of the oscillation's peak
-    amplitudes against time (least squares over the local maxima of $|y-\bar y|$, $\bar y$
-    the last third's mean). Needs at least three peaks; ValueError otherwise."""
+    Mass-proportional damping $-\gamma\lambda\dot{\mathbf x}$ decays every mode of the strip
+    as $e^{-\gamma t/2}$, so $\gamma=-2s$, $s$ the slope of $\ln$ of the oscillation's peak
+    amplitudes against time: the logarithmic decrement, fitted by least squares to one peak
+    per half cycle (the largest $|y-\bar y|$ between consecutive crossings of $\bar y$, the
+    last third's mean). Needs at least three half cycles; ValueError otherwise."""
     t = np.asarray(t, float)
     y = np.asarray(y, float)
     if t.shape != y.shape or t.ndim != 1 or t.size < 8:
         raise ValueError("t, y must be 1-d arrays of the same length (at least 8 samples)")
     yc = y - np.mean(y[2 * y.size // 3:])
-    a = np.abs(yc)
-    peaks = np.nonzero((a[1:-1] > a[:-2]) & (a[1:-1] >= a[2:]))[0] + 1
-    peaks = peaks[a[peaks] > 1e-12 * np.max(a)]
+    cross = np.nonzero(np.signbit(yc[1:]) != np.signbit(yc[:-1]))[0] + 1
+    peaks = [a + int(np.argmax(np.abs(yc[a:b]))) for a, b in zip(cross[:-1], cross[1:])]
+    peaks = np.asarray(peaks, int)
     if peaks.size < 3:
-        raise ValueError(f"y: a ring-down needs at least 3 peaks, found {peaks.size}")
-    s = np.polyfit(t[peaks], np.log(a[peaks]), 1)[0]
+        raise ValueError(f"y: a ring-down needs at least 3 peaks (half cycles), found {peaks.size}")
+    s = np.polyfit(t[peaks], np.log(np.abs(yc[peaks])), 1)[0]
     return -2.0 * s
 
 
-def _body_omega(bodies, d):
-    """omega_b of the module docstring from concrete leaves (or the defaults when traced)."""
-    try:
-        k, delta = float(bodies.stiffness), float(bodies.thickness)
-        m = min(float(np.min(np.asarray(bodies.mass))), float(np.min(np.asarray(d.node_mass)[1:-1])))
-    except (TypeError, jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
-        from ._bodies import BODY_STIFFNESS, BODY_THICKNESS
-
-        k, delta = BODY_STIFFNESS, BODY_THICKNESS
-        m = float(np.min(np.diff(np.asarray(d.fractions))) if hasattr(d, "fractions") else 1e-3)
-    return math.sqrt(2.0 * k / (delta * m))
+def _body_omega(bodies, scene):
+    r"""$\omega_b$ of the module docstring: the larger of a strip element's frequency on the
+    contact, $\sqrt{2k/(\delta\lambda)}$, and the lightest ball's on a patch of the largest
+    radius, $\sqrt{2k\sqrt{2R\delta}/(\delta M)}$ (from concrete leaves)."""
+    k, delta = float(bodies.stiffness), float(bodies.thickness)
+    r_max, m_min = float(np.max(np.asarray(bodies.radius))), float(np.min(np.asarray(bodies.mass)))
+    lam = float(scene.strip.line_density)
+    return max(math.sqrt(2.0 * k / (delta * lam)), math.sqrt(2.0 * k * math.sqrt(2.0 * r_max * delta) / (delta * m_min)))
 
 
 @eqx.filter_jit
-def _run(scene, bodies, program, theta0, dissipation, t1, dt, substeps, n_samples, n_frames, energy_tol):
+def _run(scene, bodies, program, theta0, dissipation, t1, dt, substeps, n_samples, n_frames, energy_tol, quad):
     dtype = theta0.dtype
     d = discretize(scene)
     y0 = (jnp.stack([theta0, jnp.zeros_like(theta0)]), jnp.zeros(2, dtype), bodies.position.astype(dtype),
@@ -320,13 +342,13 @@ def _run(scene, bodies, program, theta0, dissipation, t1, dt, substeps, n_sample
     def obs(t, y, a):
         q, acc, xb, vb, J = y
         aL, aR, dd, x, _ = strip_at(t, q)
-        fs = -jax.grad(strip_body_energy, argnums=1)(x, xb, bodies)
+        fs = -jax.grad(strip_body_energy, argnums=1)(x, xb, bodies, quad)
         return dict(
             fold_height=x[n // 2, 1], height_left=x[n // 4, 1], height_right=x[(3 * n) // 4, 1],
             kinetic=kinetic_energy(q[0], q[1], dd),
             potential=potential_energy(q[0], scene_at(scene, aL, aR), dd),
             ball_kinetic=0.5 * jnp.sum(bodies.mass * jnp.sum(vb**2, -1)),
-            body_energy=strip_body_energy(x, xb, bodies) + body_energy(xb, bodies, scene.gravity),
+            body_energy=strip_body_energy(x, xb, bodies, quad) + body_energy(xb, bodies, scene.gravity),
             work=acc[0], dissipated=acc[1], alpha_left=aL, alpha_right=aR,
             ball_position=xb, ball_velocity=vb, strip_force=fs, impulse=J,
             ball_clearance=body_clearance(x, xb, bodies), strip_gap=strip_clearance(x, xb, bodies))
@@ -338,7 +360,7 @@ def _run(scene, bodies, program, theta0, dissipation, t1, dt, substeps, n_sample
 
     saveat = dfx.SaveAt(subs=[dfx.SubSaveAt(ts=ts, fn=obs), dfx.SubSaveAt(ts=tf, fn=frames)])
     steps = int(n_samples - 1) + 8
-    sol = dfx.diffeqsolve(dfx.ODETerm(_no_field), RattleBodies(substeps=substeps), 0.0, t1, dt, y0, args,
+    sol = dfx.diffeqsolve(dfx.ODETerm(_no_field), RattleBodies(quadrature=quad, substeps=substeps), 0.0, t1, dt, y0, args,
                           saveat=saveat, stepsize_controller=dfx.ConstantStepSize(), max_steps=steps,
                           throw=False)
     o, fr = sol.ys
@@ -363,7 +385,7 @@ def _run(scene, bodies, program, theta0, dissipation, t1, dt, substeps, n_sample
     cols = jnp.arange(bodies.count)
     vrel = o["ball_velocity"][i_rel, cols]
     J_first = o["impulse"][i_rel, cols] - jnp.where((i_hit > 0)[:, None], o["impulse"][jnp.maximum(i_hit - 1, 0), cols], 0.0)
-    speed = jnp.sqrt(jnp.sum(o["ball_velocity"] ** 2, -1))
+    speed = safe_norm(o["ball_velocity"])
     peak = jnp.max(jnp.where(reached[:, None], speed, 0.0), 0)
     min_clear = jnp.min(jnp.where(reached[:, None], o["ball_clearance"], jnp.inf), 0)
     nanv = jnp.full_like(ts[0], jnp.nan)
@@ -385,8 +407,9 @@ def _run(scene, bodies, program, theta0, dissipation, t1, dt, substeps, n_sample
         ball_frames=fr["ball_frames"], hit=hit, t_hit=jnp.where(hit, ts[i_hit], nanv),
         t_release=jnp.where(hit & released, ts[i_rel], nanv), impulse_first=jnp.where(hit[:, None], J_first, 0.0),
         launch_velocity=jnp.where(hit[:, None], vrel, 0.0),
-        launch_speed=jnp.where(hit, jnp.sqrt(jnp.sum(vrel**2, -1)), 0.0), peak_speed=peak,
-        min_clearance=min_clear, energy_error=err, num_steps=sol.stats["num_steps"] * substeps,
+        launch_speed=jnp.where(hit, safe_norm(vrel), 0.0), peak_speed=peak,
+        min_clearance=min_clear, energy_error=err,
+        strip_mass=scene.strip.line_density * scene.strip.length, num_steps=sol.stats["num_steps"] * substeps,
         result=res, names=bodies.names)
 
 
@@ -399,7 +422,8 @@ def actuate(scene, bodies: Bodies, program: Program, *, theta0=None, state="down
     **Arguments:** `theta0` the start angles (default: the stable `state`, "down" or "up", of
     `scene` at the program's first clamp angles, `jaxrod.initial_state`); `t1` the end time
     (default: the program's last knot plus 2 T); `dissipation` (default
-    `Dissipation(damping=ACTUATOR_DAMPING)`; `Dissipation()` for an undamped run);
+    `Dissipation(damping=ACTUATOR_DAMPING, viscosity=ACTUATOR_VISCOSITY)`; `Dissipation()`
+    for an undamped run);
     `courant` the strip's step factor (RATTLE, below 0.5); `substeps` RATTLE steps per sample;
     `sample_dt` the sample spacing (default: one sample per `substeps` steps); `n_frames`
     frames for animations; `energy_tol` the energy balance's tolerance (`energy_drift`).
@@ -423,7 +447,7 @@ def actuate(scene, bodies: Bodies, program: Program, *, theta0=None, state="down
     check_int("n_frames", n_frames, lo=2)
     check_number("energy_tol", energy_tol, lo=0.0)
     if dissipation is None:
-        dissipation = Dissipation(damping=ACTUATOR_DAMPING)
+        dissipation = Dissipation(damping=ACTUATOR_DAMPING, viscosity=ACTUATOR_VISCOSITY)
     if not isinstance(dissipation, Dissipation):
         raise ValueError(f"dissipation must be a jaxrod.Dissipation, got {dissipation!r}")
     if t1 is None:
@@ -434,7 +458,7 @@ def actuate(scene, bodies: Bodies, program: Program, *, theta0=None, state="down
     st = scene.strip
     T = float(st.length) ** 2 * math.sqrt(float(st.line_density) / float(st.bending_stiffness))
     dt = min(courant * frac_min**2, DT_CAP) * T
-    dt = min(dt, BODY_COURANT / _body_omega(bodies, d))
+    dt = min(dt, BODY_COURANT / _body_omega(bodies, scene))
     macro = dt * substeps
     if sample_dt is not None:
         check_number("sample_dt", sample_dt, lo=0.0)
@@ -447,9 +471,11 @@ def actuate(scene, bodies: Bodies, program: Program, *, theta0=None, state="down
         eq = initial_state(scene_at(scene, aL, aR), state)
         theta0, ok = eq.theta, eq.result == RESULTS.successful
     theta0 = jnp.asarray(theta0, jnp.float64)
+    quad = quadrature_points(bodies, np.max(np.diff(np.asarray(scene.mesh.fractions))) * float(st.length))
     act = _run(scene, bodies, program, theta0, dissipation, float(t1), macro, int(substeps), n_samples,
-               int(n_frames), float(energy_tol))
+               int(n_frames), float(energy_tol), quad)
     return eqx.tree_at(lambda a: a.result, act, RESULTS.where(ok, act.result, RESULTS.state_not_found))
 
 
-__all__ = ["Actuation", "actuate", "damping_from_ringdown", "RattleBodies", "ACTUATOR_DAMPING", "BODY_COURANT"]
+__all__ = ["Actuation", "actuate", "damping_from_ringdown", "RattleBodies", "ACTUATOR_DAMPING", "ACTUATOR_VISCOSITY",
+           "BODY_COURANT"]

@@ -10,19 +10,22 @@ frame of MODEL.md (left clamp at the origin, right clamp at $(G,0)$), units of t
 $\varphi(g)=\frac{k\delta}3(1-g/\delta)^3$ for a gap $g<\delta$, else 0: a soft layer of
 thickness $\delta$ (`thickness`, default 0.02 L) whose force grows from zero (with its first
 two derivatives, so the dynamics and their gradients stay smooth) to $k$ (`stiffness`,
-default $10^4$ $B/L^2$) when the layer is fully compressed. A gap below zero (the layer
+default $3\cdot10^5$) when the layer is fully compressed. A gap below zero (the layer
 exhausted) is an impact too fast for the law: the run says `RESULTS.object_penetrated`.
 
-* strip and ball: $E_{sb}=\sum_m\big[\sum_j\varphi(d_{mj}-R_m)-\sum_{k=1}^{N-1}\varphi(|\mathbf c_m-\mathbf x_k|-R_m)\big]$,
-  $d_{mj}$ the distance of $\mathbf c_m$ from the closest point of segment $j$. The segments
-  count the interior nodes twice and the node terms take one count off: along a straight
-  stretch a ball feels one contact (no ripple at the nodes), at a convex corner one contact at
-  the corner, and inside a bend one contact per leg. $E_{sb}\ge\varphi(D_m-R_m)$, $D_m$ the
-  distance from the ball's centre to the strip (pair every interior node with its segment away
-  from the closest one), so the barrier of the closest contact is never cancelled. The
-  distances are $C^1$ in the positions;
-* ball and ball: $\varphi(|\mathbf c_m-\mathbf c_n|-R_m-R_n)$;
-* ball and floor (`Floor(height)`, side view): $\varphi(c_{m,y}-R_m-y_f)$, with the scene's
+* strip and ball: $E_{sb}=\sum_m\int_0^L\varphi(|\mathbf c_m-\mathbf r(s)|-R_m)\,ds$, $\mathbf r(s)$
+  the strip's centreline (straight between nodes), by the composite midpoint rule with $q$
+  points per segment, $q$ such that the points are at most a quarter of the contact patch's
+  half-width $\sqrt{2R\delta}$ apart (`quadrature_points`). Point-to-point distances make
+  $E_{sb}$ twice continuously differentiable in the positions everywhere (no switch at the
+  nodes or the segments' ends, which would make the hit's derivative jump), a ball feels a
+  sharp crease's corner like any other part of the strip, and a ball sliding along a straight
+  strip feels a ripple of the quadrature's order only. $k$ is here a stiffness per unit
+  length: a ball pressed to full compression on a straight strip holds the energy
+  $\approx0.30\,k\delta\sqrt{2R\delta}$;
+* ball and ball: $\varphi(|\mathbf c_m-\mathbf c_n|-R_m-R_n)$ with the force at full
+  compression $k\sqrt{2R\delta}$ ($R$ the smaller radius; `point_stiffness`);
+* ball and floor (`Floor(height)`, side view): $\varphi(c_{m,y}-R_m-y_f)$, likewise, with the scene's
   gravity pulling the balls down ($g\sum_mM_mc_{m,y}$);
 * table (`Table(deceleration)`, top view: the strip and the balls lie on a table, the
   strip's plane is the table's): a regularized Coulomb friction $-a_fM_m\mathbf v_m/
@@ -36,6 +39,8 @@ a ball gains is the impulse the strip gives it).
 
 from __future__ import annotations
 
+import math
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -45,8 +50,9 @@ from ..energy.contact import penalty, point_segment_distance, safe_norm
 from .._misc import check_param, is_concrete
 
 
-BODY_STIFFNESS = 1.0e4
-"""Default contact stiffness k of the bodies: the force at full compression of the layer (B/L^2)."""
+BODY_STIFFNESS = 3.0e5
+"""Default contact stiffness k of the bodies: per unit length of strip for the strip-ball
+contact (B/L^3), the force at full compression for ball-ball and floor contacts (B/L^2)."""
 BODY_THICKNESS = 0.02
 """Default contact layer thickness delta of the bodies (L)."""
 FRICTION_SPEED = 1e-3
@@ -147,17 +153,39 @@ class Bodies(eqx.Module):
         return len(self.names)
 
 
-def strip_body_energy(x, xb, bodies):
-    r"""$E_{sb}$ of strip node positions `x` (N+1, 2) and ball centres `xb` (M, 2): per ball,
-    the segments' penalties less the interior nodes' (module docstring)."""
+def quadrature_points(bodies, h_max) -> int:
+    r"""Quadrature points per segment of the strip-ball contact (static), for segments up to
+    `h_max` long: the spacing is at most a quarter of the narrowest contact patch's half-width
+    $\sqrt{2R\delta}$, and at least 4 points."""
+    try:
+        r = float(np.min(np.asarray(bodies.radius)))
+        delta = float(bodies.thickness)
+    except (TypeError, jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+        return 16
+    return int(max(4, math.ceil(4.0 * float(h_max) / math.sqrt(2.0 * r * delta))))
+
+
+def strip_body_energy(x, xb, bodies, q):
+    r"""$E_{sb}$ of strip node positions `x` (N+1, 2) and ball centres `xb` (M, 2) by the
+    composite midpoint rule with `q` points per segment (`quadrature_points`)."""
     a, b = x[:-1], x[1:]
+    seg = safe_norm(b - a)  # (N,)
+    u = (jnp.arange(q) + 0.5) / q
+    pts = a[:, None, :] + u[None, :, None] * (b - a)[:, None, :]  # (N, q, 2)
+    w = jnp.repeat(seg / q, q)
+    pts = pts.reshape(-1, 2)
 
     def one(c, r):
-        seg = penalty(point_segment_distance(c[None, :], a, b) - r, bodies.thickness, bodies.stiffness)
-        node = penalty(safe_norm(c[None, :] - x[1:-1]) - r, bodies.thickness, bodies.stiffness)
-        return jnp.sum(seg) - jnp.sum(node)
+        return jnp.sum(w * penalty(safe_norm(c[None, :] - pts) - r, bodies.thickness, bodies.stiffness))
 
     return jnp.sum(jax.vmap(one)(xb, bodies.radius))
+
+
+def point_stiffness(bodies, radius):
+    r"""The force at full compression of a ball-ball or ball-floor contact, $k\sqrt{2R\delta}$
+    ($R$ the smaller radius): the line stiffness $k$ over the width of a ball's contact patch,
+    so that a ball stops on another ball or the floor about as stiffly as on the strip."""
+    return bodies.stiffness * jnp.sqrt(2.0 * radius * bodies.thickness)
 
 
 def body_energy(xb, bodies, gravity=None):
@@ -168,10 +196,11 @@ def body_energy(xb, bodies, gravity=None):
     if m > 1:
         i, j = np.triu_indices(m, k=1)
         gap = safe_norm(xb[i] - xb[j]) - bodies.radius[i] - bodies.radius[j]
-        e = e + jnp.sum(penalty(gap, bodies.thickness, bodies.stiffness))
+        k = point_stiffness(bodies, jnp.minimum(bodies.radius[i], bodies.radius[j]))
+        e = e + jnp.sum(penalty(gap, bodies.thickness, k))
     if bodies.floor is not None:
         gap = xb[:, 1] - bodies.radius - bodies.floor.height
-        e = e + jnp.sum(penalty(gap, bodies.thickness, bodies.stiffness))
+        e = e + jnp.sum(penalty(gap, bodies.thickness, point_stiffness(bodies, bodies.radius)))
         if gravity is not None:
             e = e + gravity.g * jnp.sum(bodies.mass * xb[:, 1])
     return e

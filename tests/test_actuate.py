@@ -1,0 +1,219 @@
+"""The strip as an actuator: clamp programs, balls, hits, impulses and the energy balance."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxrod as jr
+from jaxrod.dynamics._bodies import body_energy, quadrature_points, strip_body_energy
+
+N = 16
+T1 = 1.5
+UP = jr.hold_and_move([(100.0, 100.0)], rate=2.0, hold=0.6)  # snaps up near 0.8 T
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return jr.make_scene(60.0, 0.5, n=N)
+
+
+@pytest.fixture(scope="module")
+def down(scene):
+    eq = jr.initial_state(scene, "down")
+    assert eq.result == jr.RESULTS.successful
+    return eq.theta
+
+
+def ball(position=(0.25, 0.30), mass=0.05, name="mid"):
+    return jr.Ball(name, position, 0.04, mass)
+
+
+# ----- programs ---------------------------------------------------------------------------
+
+def test_program_angles_rates_and_json():
+    p = jr.Program.from_degrees([0.0, 1.0, 3.0], [0.0, 90.0, 90.0], [0.0, 0.0, -45.0])
+    aL, aR, rL, rR = p.angles(0.5)
+    assert float(aL) == pytest.approx(math.radians(45.0)) and float(rL) == pytest.approx(math.radians(90.0))
+    aL, aR, rL, rR = p.angles(2.0)
+    assert float(aR) == pytest.approx(math.radians(-22.5)) and float(rR) == pytest.approx(math.radians(-22.5))
+    assert float(rL) == 0.0
+    aL, aR, rL, rR = p.angles(5.0)  # held after the last knot
+    assert float(aR) == pytest.approx(math.radians(-45.0)) and float(rL) == float(rR) == 0.0
+    q = jr.Program.from_json(p.to_json())
+    np.testing.assert_allclose(np.asarray(q.alpha_right), np.asarray(p.alpha_right), rtol=1e-15)
+    # differentiable in the knot angles and times
+    g = jax.grad(lambda a: p.__class__(p.times, a, p.alpha_right).angles(0.25)[0])(p.alpha_left)
+    np.testing.assert_allclose(np.asarray(g), [0.75, 0.25, 0.0])
+    gt = jax.grad(lambda t: jr.Program(t, p.alpha_left, p.alpha_right).angles(0.5)[0])(p.times)
+    assert float(gt[1]) == pytest.approx(-0.5 * math.radians(90.0))
+    h = jr.hold_and_move([(30.0, 0.0), (30.0, 60.0)], rate=1.0, hold=0.5)
+    np.testing.assert_allclose(np.asarray(h.times), [0.0, math.radians(30), math.radians(30) + 0.5,
+                                                     math.radians(90) + 0.5, math.radians(90) + 1.0])
+
+
+@pytest.mark.parametrize("make, name", [
+    (lambda: jr.Program([0.0, 1.0], [0.0], [0.0, 1.0]), "same number of knots"),
+    (lambda: jr.Program([0.0, 0.0], [0.0, 1.0], [0.0, 1.0]), "times must increase"),
+    (lambda: jr.Program([-1.0, 0.0], [0.0, 1.0], [0.0, 1.0]), "times must start"),
+    (lambda: jr.Program([0.0, 1.0], [0.0, float("nan")], [0.0, 1.0]), "alpha_left must be finite"),
+    (lambda: jr.Program.from_json({"times": [0.0]}), "alpha_left_deg"),
+    (lambda: jr.Ball("a", (0.0,), 0.1, 1.0), "position of ball 'a'"),
+    (lambda: jr.Ball("a", (0.0, 0.0), -0.1, 1.0), "radius of ball 'a'"),
+    (lambda: jr.Ball("a", (0.0, 0.0), 0.1, 0.0), "mass of ball 'a'"),
+    (lambda: jr.Bodies([ball(), ball()]), "names must be unique"),
+    (lambda: jr.Bodies([]), "balls must be"),
+    (lambda: jr.Bodies([ball()], stiffness=0.0), "stiffness"),
+    (lambda: jr.Bodies([ball()], table=jr.Table(), floor=jr.Floor()), "table, floor"),
+    (lambda: jr.Table(-1.0), "deceleration"),
+    (lambda: jr.damping_from_ringdown(np.arange(10.0), np.ones(10)), "ring-down needs at least 3 peaks"),
+])
+def test_bad_input_names_the_parameter(make, name):
+    with pytest.raises(ValueError, match=name):
+        make()
+
+
+def test_actuate_bad_input(scene):
+    b = jr.Bodies([ball()])
+    with pytest.raises(ValueError, match="bodies must be"):
+        jr.actuate(scene, [ball()], UP)
+    with pytest.raises(ValueError, match="program must be"):
+        jr.actuate(scene, b, jr.Protocol())
+    with pytest.raises(ValueError, match="state must be"):
+        jr.actuate(scene, b, UP, state="left")
+    with pytest.raises(ValueError, match="courant"):
+        jr.actuate(scene, b, UP, courant=0.7)
+
+
+# ----- contact law ------------------------------------------------------------------------
+
+def test_contact_forces_are_equal_and_opposite_and_vanish_when_clear():
+    """Every contact energy depends on position differences only: the strip's and the balls'
+    forces sum to zero (Newton's third law); outside the layer they are exactly zero; a ball
+    sliding along a straight strip feels the same energy above a node and between nodes (the
+    quadrature's ripple), and the quadrature has converged at the default point count."""
+    rng = np.random.default_rng(0)
+    x = jnp.asarray(np.cumsum(rng.normal(size=(17, 2)) * 0.05, 0))
+    b = jr.Bodies([ball(tuple(np.asarray(x[5]) + [0.0, 0.05])), ball(tuple(np.asarray(x[9]) + [0.03, 0.03]), name="b")])
+    xb = b.position
+    q = quadrature_points(b, 0.1)
+    gx, gb = jax.grad(strip_body_energy, argnums=(0, 1))(x, xb, b, q)
+    assert float(jnp.max(jnp.abs(gb))) > 0
+    np.testing.assert_allclose(np.asarray(jnp.sum(gx, 0) + jnp.sum(gb, 0)), 0.0, atol=1e-9 * float(jnp.max(jnp.abs(gb))))
+    gbb = jax.grad(body_energy)(xb + jnp.array([[0.0, 0.0], [-0.02, 0.0]]), b)
+    np.testing.assert_allclose(np.asarray(jnp.sum(gbb, 0)), 0.0, atol=1e-9)
+    far = jnp.array([[10.0, 10.0], [20.0, 20.0]])
+    assert float(strip_body_energy(x, far, b, q)) == 0.0
+    assert float(jnp.max(jnp.abs(jax.grad(strip_body_energy, argnums=1)(x, far, b, q)))) == 0.0
+    line = jnp.stack([jnp.linspace(0.0, 1.0, 11), jnp.zeros(11)], -1)
+    one = jr.Bodies([jr.Ball("r", (0.0, 0.0), 0.04, 1.0)])
+    q1 = quadrature_points(one, 0.1)
+    e = np.array([float(strip_body_energy(line, jnp.array([[xc, 0.05]]), one, q1)) for xc in np.linspace(0.3, 0.4, 21)])
+    assert e[0] > 0 and np.ptp(e) < 2e-3 * e[0]
+    fine = float(strip_body_energy(line, jnp.array([[0.33, 0.05]]), one, 8 * q1))
+    assert float(strip_body_energy(line, jnp.array([[0.33, 0.05]]), one, q1)) == pytest.approx(fine, rel=2e-3)
+
+
+# ----- runs -------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def snap_up(scene, down):
+    return jr.actuate(scene, jr.Bodies([ball()]), UP, theta0=down, dissipation=jr.Dissipation(), t1=T1)
+
+
+def test_a_snap_launches_the_ball_it_strikes(snap_up):
+    """One undamped snap up under a ball above the fold: the ball is hit once, its momentum
+    is the impulse the strip gave it (to round-off), the energy balance closes, the contact
+    layer holds."""
+    a = snap_up
+    assert a.result == jr.RESULTS.successful, jr.result_name(a.result)
+    hits = a.hits()
+    assert [h["name"] for h in hits] == ["mid"]
+    h = hits[0]
+    assert 0.8 < h["time"] < 0.95 and h["launch_speed"] > 15.0
+    M = 0.05
+    np.testing.assert_allclose(np.asarray(M * a.ball_velocity[-1, 0]), np.asarray(a.impulse[-1, 0]), rtol=1e-10, atol=1e-12)
+    assert h["impulse_norm"] == pytest.approx(M * h["launch_speed"], rel=1e-6)
+    assert float(a.energy_error) < 5e-3
+    assert 0 < float(a.min_clearance[0]) < 0.02  # inside the layer, never through it
+    snaps = a.snaps()
+    assert [(s["from"], s["to"], s["kind"]) for s in snaps] == [("DD", "UU", "snap")]
+    assert snaps[0]["time"] < h["time"]
+
+
+def test_a_program_that_snaps_nothing_hits_nothing(scene, down):
+    """Clamps to 40 deg and back (below the snap angle): no snap, the ball never moves."""
+    prog = jr.hold_and_move([(40.0, 40.0), (0.0, 0.0)], rate=2.0, hold=0.2)
+    a = jr.actuate(scene, jr.Bodies([ball()]), prog, theta0=down, t1=T1)
+    assert a.result == jr.RESULTS.successful, jr.result_name(a.result)
+    assert a.hits() == [] and a.snaps() == []
+    assert float(jnp.max(jnp.abs(a.ball_velocity))) == 0.0
+    assert float(jnp.max(a.fold_height)) < 0.0
+    assert float(a.energy_error) < 1e-3
+
+
+def test_energy_balance_closes_over_several_snaps(scene):
+    """Up, down, up in one damped run with table friction (clamp work and dissipation in the
+    balance): three snaps, the ball struck by the first and slowed to rest by the table."""
+    prog = jr.hold_and_move([(100.0, 100.0), (-110.0, -110.0), (100.0, 100.0)], rate=3.0, hold=0.8)
+    b = jr.Bodies([ball((0.25, 0.45))], table=jr.Table(20.0))
+    a = jr.actuate(scene, b, prog)
+    assert a.result == jr.RESULTS.successful, jr.result_name(a.result)
+    # the snaps are the fold's crossings; on the way down both halves first cross the clamp
+    # line quasi-statically (a drift UU -> DD), then the fold snaps
+    events = a.snaps()
+    snaps = [e for e in events if e["kind"] == "snap"]
+    assert [e["fold"] for e in snaps] == ["up", "down", "up"], events
+    assert [(e["from"], e["to"]) for e in snaps] == [("DD", "UU"), ("DD", "DD"), ("DD", "UU")], events
+    assert [(e["from"], e["to"]) for e in events if e["kind"] == "drift"] == [("UU", "DD")], events
+    assert float(a.energy_error) < 1e-3
+    assert float(a.dissipated[-1]) > 0.5 * float(a.clamp_work[-1]) > 0
+    assert [h["name"] for h in a.hits()] == ["mid"] and a.hits()[0]["time"] < a.snaps()[1]["time"]
+    # friction: the ball stops (a_f = 20: from 20 v* in about 1 T)
+    assert float(jnp.linalg.norm(a.ball_velocity[-1, 0])) < 1e-2 * a.hits()[0]["launch_speed"]
+
+
+def test_penetration_is_flagged(scene, down):
+    """A contact layer far too soft for the impact: `object_penetrated`, not a silent pass."""
+    a = jr.actuate(scene, jr.Bodies([ball()], stiffness=20.0), UP, theta0=down, t1=T1)
+    assert a.result == jr.RESULTS.object_penetrated
+    assert float(a.min_clearance[0]) < 0
+
+
+def test_damping_from_ringdown(scene):
+    """gamma back from a synthetic ring-down, and from the fold height of a damped strip
+    released from its equilibrium at clamp angles of 5 deg with the clamps held at 0 (small
+    oscillations: mass-proportional damping decays every mode as exp(-gamma t / 2))."""
+    t = np.linspace(0.0, 10.0, 4001)
+    assert jr.damping_from_ringdown(t, 0.3 + np.exp(-0.4 * t) * np.cos(7.0 * t)) == pytest.approx(0.8, rel=2e-3)
+    start = jr.initial_state(jr.make_scene(60.0, 0.5, 5.0, n=N), "down").theta
+    hold = jr.Program([0.0, 1.0], [0.0, 0.0], [0.0, 0.0])
+    a = jr.actuate(scene, jr.Bodies([ball((5.0, 5.0))]), hold, theta0=start, t1=T1,
+                   dissipation=jr.Dissipation(damping=4.0))
+    assert a.result == jr.RESULTS.successful
+    assert jr.damping_from_ringdown(np.asarray(a.t), np.asarray(a.fold_height)) == pytest.approx(4.0, rel=0.05)
+
+
+def test_program_gradient_matches_central_differences(scene, down):
+    """d(launch speed) / d(knot angles) of a one-clamp program, through the run and the
+    contact, against central differences. On the scale of a step the hit's discretization
+    error depends on where the hit falls between steps (the launch speed wiggles by ~1e-6 of
+    itself per 1e-4 rad), so the differences are taken at h = 3e-7 rad, below that scale."""
+    one_clamp = jr.hold_and_move([(70.0, 0.0)], rate=2.0, hold=0.9)
+    b = jr.Bodies([ball()])
+
+    def launch(x):
+        p = jr.Program(one_clamp.times, x[0], x[1])
+        return jr.actuate(scene, b, p, theta0=down, t1=T1).launch_speed[0]
+
+    x0 = jnp.stack([one_clamp.alpha_left, one_clamp.alpha_right])
+    g = jax.grad(launch)(x0)
+    assert float(launch(x0)) > 5.0
+    h = 3e-7
+    for k in [(0, 1), (1, 1), (1, 2)]:
+        e = jnp.zeros_like(x0).at[k].set(h)
+        fd = (launch(x0 + e) - launch(x0 - e)) / (2 * h)
+        assert float(g[k]) == pytest.approx(float(fd), rel=2e-3, abs=1e-3), k
+    assert abs(float(g[0, 1])) > 0.5
