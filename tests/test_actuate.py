@@ -1,6 +1,8 @@
 """The strip as an actuator: clamp programs, balls, hits, impulses and the energy balance."""
 
+import json
 import math
+import re
 
 import jax
 import jax.numpy as jnp
@@ -217,3 +219,50 @@ def test_program_gradient_matches_central_differences(scene, down):
         fd = (launch(x0 + e) - launch(x0 - e)) / (2 * h)
         assert float(g[k]) == pytest.approx(float(fd), rel=2e-3, abs=1e-3), k
     assert abs(float(g[0, 1])) > 0.5
+
+
+# ----- CLI --------------------------------------------------------------------------------
+
+def test_cli_actuate(tmp_path, capsys):
+    """`jaxrod actuate --program FILE --objects FILE --json`: one JSON object with the hits in
+    time order, the snaps, the energy error and the code; the same numbers as the API."""
+    from jaxrod.cli._main import main
+
+    prog = tmp_path / "p.json"
+    prog.write_text(json.dumps({**UP.to_json(), "t1": T1}))
+    objs = tmp_path / "o.json"
+    objs.write_text(json.dumps({"balls": [{"name": "mid", "x": 0.25, "y": 0.30, "radius": 0.04, "mass": 0.05}]}))
+    gif = tmp_path / "run.gif"
+    assert main(["actuate", "--program", str(prog), "--objects", str(objs), "--n", str(N), "--undamped",
+                 "--json", "--animate", str(gif)]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["result"] == "successful" and gif.stat().st_size > 0
+    assert [h["name"] for h in rec["hits"]] == ["mid"] and rec["balls"]["mid"]["hit"] is True
+    assert [s["fold"] for s in rec["snaps"] if s["kind"] == "snap"] == ["up"]
+    assert rec["energy_error"] < 5e-3
+    ref = jr.actuate(jr.make_scene(60.0, 0.5, n=N), jr.Bodies([ball()]), UP, t1=T1, dissipation=jr.Dissipation())
+    assert rec["hits"][0]["launch_speed"] == pytest.approx(float(ref.launch_speed[0]), rel=1e-9)
+
+
+@pytest.mark.parametrize("program, objects, message", [
+    (None, None, "program: cannot read"),
+    ("{not json", None, "program: .* is not valid JSON"),
+    ('{"times": [0, 1]}', None, "alpha_left_deg"),
+    ('{"times": [0, 1], "alpha_left_deg": [0, 10], "alpha_right_deg": [0]}', None, "same number of knots"),
+    ('{"times": [0, 1], "alpha_left_deg": [0, 10], "alpha_right_deg": [0, 0]}', '{"balls": []}', "balls"),
+    ('{"times": [0, 1], "alpha_left_deg": [0, 10], "alpha_right_deg": [0, 0]}',
+     '{"balls": [{"name": "a", "x": 0, "y": 1, "radius": -1, "mass": 1}]}', "radius of ball 'a'"),
+    ('{"times": [0, 1], "alpha_left_deg": [0, 10], "alpha_right_deg": [0, 0], "t1": -1}', None, "t1"),
+])
+def test_cli_actuate_bad_input(tmp_path, capsys, program, objects, message):
+    from jaxrod.cli._main import main
+
+    args = ["actuate", "--program", str(tmp_path / "p.json")]
+    if program is not None:
+        (tmp_path / "p.json").write_text(program)
+    if objects is not None:
+        (tmp_path / "o.json").write_text(objects)
+        args += ["--objects", str(tmp_path / "o.json")]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and re.search(message, err), err

@@ -32,7 +32,7 @@ both. The first run of a command compiles for up to a minute."""
 
 
 # modules that register more subcommands (see `_build_parser`)
-_COMMAND_MODULES = ("._critical", "._statics", "._dynamics", "._design")
+_COMMAND_MODULES = ("._critical", "._statics", "._dynamics", "._actuate", "._design")
 
 
 class InputError(Exception):

@@ -194,7 +194,7 @@ class Actuation(eqx.Module):
     `impulse`, and `ball_clearance` (n, M). Frames `t_frames` (F,): `positions` (F, N+1, 2),
     `ball_frames` (F, M, 2). Per ball (M,): `hit`, `t_hit`, `t_release` (NaN if none),
     `impulse_first` (M, 2), `launch_velocity` (M, 2), `launch_speed`, `peak_speed`,
-    `min_clearance`. Scalars: `energy_error`, `strip_mass` ($\lambda L$), `num_steps`, `result` ([`jaxrod.RESULTS`][]).
+    `min_clearance`, `ball_radius`. Scalars: `energy_error`, `strip_mass` ($\lambda L$), `num_steps`, `result` ([`jaxrod.RESULTS`][]).
     `names`: the balls' names."""
 
     t: jax.Array
@@ -228,6 +228,7 @@ class Actuation(eqx.Module):
     min_clearance: jax.Array
     energy_error: jax.Array
     strip_mass: jax.Array
+    ball_radius: jax.Array
     num_steps: jax.Array
     result: RESULTS
     names: tuple = eqx.field(static=True)
@@ -409,7 +410,7 @@ def _run(scene, bodies, program, theta0, dissipation, t1, dt, substeps, n_sample
         launch_velocity=jnp.where(hit[:, None], vrel, 0.0),
         launch_speed=jnp.where(hit, safe_norm(vrel), 0.0), peak_speed=peak,
         min_clearance=min_clear, energy_error=err,
-        strip_mass=scene.strip.line_density * scene.strip.length, num_steps=sol.stats["num_steps"] * substeps,
+        strip_mass=scene.strip.line_density * scene.strip.length, ball_radius=bodies.radius, num_steps=sol.stats["num_steps"] * substeps,
         result=res, names=bodies.names)
 
 

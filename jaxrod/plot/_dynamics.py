@@ -117,3 +117,40 @@ def animate_snap(traj, path, *, fps=20):
     anim.save(path, writer=PillowWriter(fps=fps))
     plt.close(fig)
     return path
+
+
+def animate_actuation(act, path, *, fps=20):
+    """An animated GIF of an actuation run (`jaxrod.actuate`): the strip, the balls (circles,
+    labelled) and the time; pillow writer."""
+    plt = _mpl()
+    from matplotlib.animation import FuncAnimation, PillowWriter
+    from matplotlib.patches import Circle
+
+    tf = np.asarray(act.t_frames)
+    t_end = float(np.max(np.where(np.isfinite(np.asarray(act.t)), np.asarray(act.t), 0.0)))
+    ok = tf <= t_end
+    pos, balls, tf = np.asarray(act.positions)[ok], np.asarray(act.ball_frames)[ok], tf[ok]
+    radius = np.asarray(act.ball_radius)
+    pts = np.concatenate([pos.reshape(-1, 2), balls[0]], 0)
+    lo, hi = pts.min(0) - 0.1, pts.max(0) + 0.1
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal")
+    (line,) = ax.plot([], [], "b-", lw=2)
+    circles = [ax.add_patch(Circle(balls[0, m], radius[m], color=f"C{m + 1}", alpha=0.8)) for m in range(radius.size)]
+    labels = [ax.text(*balls[0, m], name, ha="center", va="center", fontsize=7) for m, name in enumerate(act.names)]
+    txt = ax.set_title("")
+
+    def update(i):
+        line.set_data(pos[i, :, 0], pos[i, :, 1])
+        for m, (c, lab) in enumerate(zip(circles, labels)):
+            c.center = balls[i, m]
+            lab.set_position(balls[i, m])
+        txt.set_text(f"t = {tf[i]:.3f} T")
+        return [line, txt, *circles, *labels]
+
+    anim = FuncAnimation(fig, update, frames=len(pos), blit=False)
+    anim.save(path, writer=PillowWriter(fps=fps))
+    plt.close(fig)
+    return path
