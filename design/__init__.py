@@ -38,3 +38,10 @@ from ._studies import verify_snap_angles as verify_snap_angles
 from ._studies import SpeedStudyResult as SpeedStudyResult
 from ._studies import SpeedVerification as SpeedVerification
 from ._studies import verify_snap_speed as verify_snap_speed
+from ._programs import design_program as design_program
+from ._programs import Fig4Result as Fig4Result
+from ._programs import fig4_bodies as fig4_bodies
+from ._programs import fig4_study as fig4_study
+from ._programs import ProgramDesign as ProgramDesign
+from ._programs import sequence_program as sequence_program
+from ._programs import two_knot_program as two_knot_program

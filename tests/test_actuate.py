@@ -266,3 +266,29 @@ def test_cli_actuate_bad_input(tmp_path, capsys, program, objects, message):
     assert main(args) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and re.search(message, err), err
+
+
+# ----- design -----------------------------------------------------------------------------
+
+def test_program_loss_is_zero_exactly_inside_the_goal():
+    from jaxrod.design._programs import _loss
+
+    v = jnp.array([0.5, 0.9, 6.0])
+    assert float(_loss(v, 0.0, 2, 5.0, 1.0, 0.1)) == 0.0
+    assert float(_loss(v.at[2].set(5.4), 0.0, 2, 5.0, 1.0, 0.1)) > 0  # below (1 + margin) v_launch
+    assert float(_loss(v.at[0].set(0.95), 0.0, 2, 5.0, 1.0, 0.1)) > 0  # above (1 - margin) v_spare
+    assert float(_loss(v, 0.3, 2, 5.0, 1.0, 0.1)) == pytest.approx(0.09)
+
+
+@pytest.mark.slow  # ~60 s on 2 cores (the reverse-mode compile of a three-ball run); CI checks the
+# program gradient itself against central differences above
+def test_designed_program_launches_its_target_and_spares_the_others():
+    """From a program that launches the centre ball too, Adam on the gradient through the run
+    finds one that launches only the right ball; an independent run at N = 24 confirms it."""
+    from jaxrod import design
+
+    d = design.design_program(jr.make_scene(60.0, 0.5, n=N), design.fig4_bodies(), "right", (50.0, -40.0),
+                              v_launch=5.0, v_spare=1.2, steps=12, n_check=24)
+    assert d.reached and d.confirmed, d
+    assert d.history[0] > 1.0 and d.history[-1] == 0.0
+    assert d.check["right"] >= 5.0 and d.check["left"] <= 1.2 and d.check["centre"] <= 1.2

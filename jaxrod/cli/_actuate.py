@@ -5,7 +5,8 @@
 ("down" or "up", the start state at the first knot). `--objects FILE.json` holds the balls
 and the contact law, `{"balls": [{"name", "x", "y", "radius", "mass"}, ...], "stiffness",
 "thickness", "table": {"deceleration"} | "floor": {"height"}}` (only `balls` required);
-without it the three balls of `DEFAULT_OBJECTS` lie on a table above the strip. The JSON
+without it the three balls of `DEFAULT_OBJECTS` (those of `jaxrod.design.fig4_bodies`) lie on
+a table above the strip. The JSON
 output has the hits in time order (name, time, impulse, launch speed), the snaps (time,
 kind, from, to, fold), the energy balance's relative error and the result code; exit code 0
 for a successful run, 3 for a flagged one, 2 for bad input.
@@ -20,9 +21,9 @@ from ._main import EXIT_NOT_CONVERGED, EXIT_OK, InputError, add_scene_args, make
 
 DEFAULT_OBJECTS = {
     "balls": [
-        {"name": "left", "x": 0.08, "y": 0.22, "radius": 0.04, "mass": 0.05},
+        {"name": "left", "x": 0.05, "y": 0.10, "radius": 0.04, "mass": 0.05},
         {"name": "centre", "x": 0.25, "y": 0.47, "radius": 0.04, "mass": 0.05},
-        {"name": "right", "x": 0.42, "y": 0.22, "radius": 0.04, "mass": 0.05},
+        {"name": "right", "x": 0.45, "y": 0.10, "radius": 0.04, "mass": 0.05},
     ],
     "table": {"deceleration": 5.0},
 }

@@ -12,9 +12,13 @@ projected onto the links' tangents). The contacts are conservative forces of the
 the coupled step stays symplectic when undamped. Dissipative forces (the strip's `Dissipation`,
 the table's friction) are evaluated at the half-step velocities as in `simulate`.
 
-**Step.** $\Delta t=\min(\text{courant}\,h_{\min}^2,\ 2\cdot10^{-4},\ 0.2/\omega_b)$ in units of
-$T$, $\omega_b$ the frequency of the stiffest contact (`_body_omega`): the contact's own
-oscillation is resolved with about 30 steps. Measured (one snap up, $\Psi_0=60^\circ$, $G/L=0.5$, N = 24, a ball of
+**Step.** $\Delta t=\min(\text{courant}\,h_{\min}^2,\ 2\cdot10^{-4},\ 0.2/\omega_b,\ 1/\gamma_{\max})$
+in units of $T$: $\omega_b$ the frequency of the stiffest contact (`_body_omega`), so that the
+contact's own oscillation is resolved with about 30 steps, and
+$\gamma_{\max}=16\eta/(\lambda h_{\min}^4)$ the damping rate the hinge viscosity $\eta$ gives the
+highest bending mode ($\omega_{\max}^2=16B/(\lambda h^4)$, rate $\eta\omega_{\max}^2/B$), which the
+explicit kicks must resolve (with $\eta$ = 1e-2 a run at N = 32 and the contact's step failed
+its constraint solve). Measured (one snap up, $\Psi_0=60^\circ$, $G/L=0.5$, N = 24, a ball of
 mass 0.05 $\lambda L$ launched at 26.0 $v^*$, undamped): energy error 9.3e-3 / 2.7e-3 / 5.8e-4 /
 2.0e-4 at 0.4 / 0.2 / 0.1 / 0.05 $/\omega_b$, launch speed within 4e-5 of the finest at 0.2.
 
@@ -59,7 +63,7 @@ from ._bodies import (Bodies, body_clearance, body_energy, friction_force, quadr
                       strip_clearance)
 from ._equations import Dissipation, check_scene, inverse_node_mass, kinematics, kinetic_energy, potential_energy, scene_at
 from ._program import Program
-from ._rattle import angles, project_velocity, rattle_forces, shake
+from ._rattle import angles, project_velocity, rattle_forces, shake, substeps
 from ._simulate import DT_CAP
 from ..energy.contact import safe_norm
 from ..energy.geometry import discretize, scene_dtype
@@ -73,13 +77,14 @@ ACTUATOR_DAMPING = 1.0
 r"""Default viscous damping $\gamma$ of `actuate` (1/T): the strip's ring-down decays as
 $e^{-\gamma t/2}$, to 1/e in 2 T, so that holds of a few T let the strip settle between
 snaps. Calibrate it for a real strip with `damping_from_ringdown`."""
-ACTUATOR_VISCOSITY = 1e-2
-r"""Default hinge viscosity $\eta$ of `actuate` ($B\,T$): it damps the grid-scale bending
-modes that ring after a snap. Without it a ball's launch speed depends on the phase of that
-ringing at the hit: measured at $\Psi_0=60^\circ$, $G/L=0.5$, N = 16, the launch speed
-wiggles by 3e-4 $v^*$ over 1e-4 rad of a clamp knot, so its derivative swings by $\pm20$
-per rad about a trend of 3, and a gradient is useless for design; with it the launch speed is
-smooth on that scale and 9 % lower (22.28 against 24.48 $v^*$)."""
+ACTUATOR_VISCOSITY = 1e-3
+r"""Default hinge viscosity $\eta$ of `actuate` ($B\,T$; a damping ratio of a few percent on the
+fundamental): it damps the grid-scale bending modes that ring after a snap. Without it a
+ball's launch speed depends on the phase of that ringing at the hit. Measured at
+$\Psi_0=60^\circ$, $G/L=0.5$, N = 16, the right ball of `jaxrod.design.fig4_bodies` under the
+program (60, -30) deg: without viscosity its speed goes up and down (15.48, 15.52, 15.56,
+15.56, 15.54, ...) as the left peak moves by 0.25 deg, so a gradient misleads a design; with
+it the speed rises evenly by 0.0195 v* per 0.25 deg, and is 6 % lower (14.57 against 15.54)."""
 
 
 def _dissipated_power(t, omega, v, vb, args):
@@ -140,18 +145,9 @@ class RattleBodies(dfx.AbstractSolver):
         return x, v, theta, f, p, fb, fs, pd, mu
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
-        del made_jump
-        k = self.substeps
-        h = (t1 - t0) / k
-
-        def sub(i, c):
-            y, st, ok = c
-            ta = t0 + i * h
-            y, st, ok_i = self._substep(ta, ta + h, y, args, st)
-            return y, st, ok & ok_i
-
-        init = (y0, solver_state, jnp.ones((), bool))
-        y1, st1, ok = jax.lax.fori_loop(0, k, sub, init) if k > 1 else sub(0, init)
+        del made_jump  # fixed steps only
+        y1, st1, ok = substeps(self.substeps, t0, t1, y0, solver_state,
+                               lambda ta, tb, y, st: self._substep(ta, tb, y, args, st))
         result = dfx.RESULTS.where(ok, dfx.RESULTS.successful, dfx.RESULTS.nonlinear_divergence)
         return y1, None, dict(y0=y0, y1=y1), st1, result
 
@@ -234,17 +230,27 @@ class Actuation(eqx.Module):
     names: tuple = eqx.field(static=True)
 
     def hits(self) -> list[dict]:
-        """The hits in time order: name, time, first-contact impulse (vector and magnitude),
-        launch velocity and speed, peak speed (NumPy floats; host-side)."""
+        """Every contact of the strip with a ball, in time order (host-side): `name`, `time`
+        (the first sample in contact), `impulse` (the strip's impulse over that contact, a
+        vector, and `impulse_norm`), `launch_velocity` and `launch_speed` (the ball's velocity at
+        the first sample after it), `contact` (1 for a ball's first contact, 2 for its second,
+        ...). A ball's first contact is the one `launch_speed` and `impulse_first` report."""
+        t = np.asarray(self.t)
+        ok = np.isfinite(t)
+        force = np.sqrt(np.sum(np.asarray(self.strip_force)[ok] ** 2, -1))
+        J, vel = np.asarray(self.impulse)[ok], np.asarray(self.ball_velocity)[ok]
+        t = t[ok]
         out = []
         for m, name in enumerate(self.names):
-            if not bool(self.hit[m]):
-                continue
-            J = np.asarray(self.impulse_first[m])
-            out.append(dict(name=name, time=float(self.t_hit[m]), impulse=[float(J[0]), float(J[1])],
-                            impulse_norm=float(np.hypot(*J)), launch_speed=float(self.launch_speed[m]),
-                            launch_velocity=[float(x) for x in np.asarray(self.launch_velocity[m])],
-                            peak_speed=float(self.peak_speed[m])))
+            on = np.concatenate([[0], (force[:, m] > 0).astype(int), [0]])
+            starts, ends = np.nonzero(np.diff(on) == 1)[0], np.nonzero(np.diff(on) == -1)[0]
+            for c, (a, b) in enumerate(zip(starts, ends)):
+                after = min(b, t.size - 1)
+                dJ = J[after, m] - (J[a - 1, m] if a > 0 else 0.0)
+                v = vel[after, m]
+                out.append(dict(name=name, time=float(t[a]), impulse=[float(dJ[0]), float(dJ[1])],
+                                impulse_norm=float(np.hypot(*dJ)), launch_velocity=[float(v[0]), float(v[1])],
+                                launch_speed=float(np.hypot(*v)), contact=c + 1))
         return sorted(out, key=lambda h: h["time"])
 
     def snaps(self, *, min_speed=2.0, merge=0.1) -> list[dict]:
@@ -454,12 +460,15 @@ def actuate(scene, bodies: Bodies, program: Program, *, theta0=None, state="down
     if t1 is None:
         t1 = float(program.duration) + 2.0
     check_number("t1", t1, lo=0.0)
-    d = discretize(scene)
     frac_min = float(np.min(np.diff(np.asarray(scene.mesh.fractions))))
     st = scene.strip
     T = float(st.length) ** 2 * math.sqrt(float(st.line_density) / float(st.bending_stiffness))
     dt = min(courant * frac_min**2, DT_CAP) * T
     dt = min(dt, BODY_COURANT / _body_omega(bodies, scene))
+    eta = float(dissipation.viscosity)
+    if eta > 0:  # the explicit hinge viscosity's own limit (module docstring)
+        h_min = frac_min * float(st.length)
+        dt = min(dt, float(st.line_density) * h_min**4 / (16.0 * eta))
     macro = dt * substeps
     if sample_dt is not None:
         check_number("sample_dt", sample_dt, lo=0.0)

@@ -127,6 +127,21 @@ def shake(x0, v0, f0, mu, invm, h, dt, iters, tol):
     return x1, mu, residual < tol
 
 
+def substeps(k, t0, t1, carry, state, substep):
+    """`k` steps of `substep(ta, tb, carry, state) -> (carry, state, converged)` over equal
+    parts of [t0, t1]; returns the carry, the state and whether every step converged."""
+    h = (t1 - t0) / k
+
+    def sub(i, c):
+        w, st, ok = c
+        ta = t0 + i * h
+        w, st, ok_i = substep(ta, ta + h, w, st)
+        return w, st, ok & ok_i
+
+    init = (carry, state, jnp.ones((), bool))
+    return lax.fori_loop(0, k, sub, init) if k > 1 else sub(0, init)
+
+
 class Rattle(dfx.AbstractSolver):
     """RATTLE for jaxrod's strip (module docstring). Needs `simulate`'s `args`
     `(scene, protocol, dissipation, baumgarte, d)`; `baumgarte` is unused (the end
@@ -158,17 +173,8 @@ class Rattle(dfx.AbstractSolver):
         # `substeps` RATTLE steps of (t1 - t0) / substeps per diffrax step (diffrax's per-step
         # work -- event, saving, controller -- then runs once per macro step).
         del made_jump
-        k = self.substeps
-        h = (t1 - t0) / k
-
-        def sub(i, c):
-            w, st, ok = c
-            ta = t0 + i * h
-            w, st, ok_i = self._substep(ta, ta + h, w, args, st)
-            return w, st, ok & ok_i
-
-        init = (y0[1], solver_state, jnp.ones((), bool))
-        w1, st1, ok = lax.fori_loop(0, k, sub, init) if k > 1 else sub(0, init)
+        w1, st1, ok = substeps(self.substeps, t0, t1, y0[1], solver_state,
+                               lambda ta, tb, w, st: self._substep(ta, tb, w, args, st))
         x1, v1, th1, _, _, _ = st1
         _, om1 = angles(x1, v1, th1)
         y1 = (jnp.stack([th1, om1]), w1)

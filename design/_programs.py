@@ -1,0 +1,231 @@
+r"""Clamp programs designed by gradient: launch one ball, spare the others (the paper's Fig. 4).
+
+**Program.** Two straight moves of the clamps from the down state at $\alpha_L=\alpha_R=0$:
+both clamps reach their peak angles $(p_L, p_R)$ at $t=$ `ramp` and hold them for `hold`
+(`two_knot_program`). The design variables are $(p_L,p_R)$ in degrees.
+
+**Objective.** With $v_m$ the peak speed of ball $m$ over the run (`jaxrod.Actuation.peak_speed`),
+target $t$, a launch speed $v_L$ and a spare speed $v_S$,
+
+$$\mathcal L(p)=\Big(\frac{\max(0,\,(1+\mu)v_L-v_t)}{v_L}\Big)^2+\sum_{m\ne t}\Big[\Big(\frac{\max(0,\,v_m-(1-\mu)v_S)}{v_S}\Big)^2
++\Big(\frac{\max(0,\,d_m-(1-\mu)d_S)}{d_S}\Big)^2\Big],$$
+
+the last sum only with a displacement bound $d_S$ (`d_spare`), $d_m$ the distance ball $m$
+ends up from where it started: a spared ball can be required to stay put, not only slow (in
+the Fig. 4 scene a side ball nudged at 0.7 v* by program A slid 0.05 L, out of program B's
+reach, and with $d_S$ = 0.01 L the optimizer found no program for A),
+
+plus, while the strip never touches the target, its smallest gap beyond the contact layer in
+layer thicknesses squared (a run that misses the target would otherwise have no gradient).
+It is zero exactly when the target leaves faster than $(1+\mu)v_L$ and every other ball stays
+below $(1-\mu)v_S$ and within $(1-\mu)d_S$ of its place (the margin $\mu$ = 0.1 keeps the design inside the goal when it is re-checked on
+a finer mesh). Its gradient goes through the whole run (`jaxrod.actuate`: RATTLE, the
+contacts, the table's friction) by reverse-mode autodiff; the contact law is twice
+differentiable and the hinge viscosity of `jaxrod.ACTUATOR_VISCOSITY` damps the grid-scale
+ringing that would otherwise make the launch speed wiggle on the scale of 1e-4 rad
+(`jaxrod.dynamics._actuate`). It is minimized by Adam (optax) on $p$ in degrees, and the
+design is re-checked by an independent forward run on a finer mesh.
+
+**The paper's Fig. 4** (`fig4_study`): three balls on a table above the strip
+($\Psi_0=60^\circ$, $G/L=0.5$), left, centre and right (`FIG4_BALLS`); program A turns the
+left clamp to launch the right ball, B the right clamp to launch the left ball, C both clamps
+to launch the centre ball, each designed from a naive start (`FIG4_STARTS`) and reported with
+its re-check, `confirmed` or not.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxrod as jr
+from jaxrod.energy.contact import safe_norm
+
+FIG4_BALLS = (("left", (0.05, 0.10)), ("centre", (0.25, 0.47)), ("right", (0.45, 0.10)))
+"""Names and centres (L) of the Fig. 4 balls: radius 0.04 L, mass 0.05 lambda L, on a table
+with friction deceleration 5 L/T^2."""
+FIG4_STARTS = {"right": (50.0, -40.0), "left": (-40.0, 50.0), "centre": (120.0, 120.0)}
+"""The naive programs the optimizer starts from, peaks (p_L, p_R) in degrees, per target."""
+FIG4_PROGRAMS = ("right", "left", "centre")
+"""The order of the paper's sequence: one clamp (left turns, right ball), the mirror, both."""
+
+
+def fig4_bodies() -> jr.Bodies:
+    """The balls of `FIG4_BALLS` on their table."""
+    return jr.Bodies([jr.Ball(name, pos, 0.04, 0.05) for name, pos in FIG4_BALLS], table=jr.Table(5.0))
+
+
+def fig4_objects_json() -> dict:
+    """`fig4_bodies` in the JSON of `jaxrod actuate --objects`."""
+    return {"balls": [{"name": name, "x": x, "y": y, "radius": 0.04, "mass": 0.05} for name, (x, y) in FIG4_BALLS],
+            "table": {"deceleration": 5.0}}
+
+
+def two_knot_program(peaks_deg, *, ramp=1.0, hold=0.8) -> jr.Program:
+    """Both clamps from 0 to their peaks (p_L, p_R) degrees by t = `ramp`, held for `hold`."""
+    p = jnp.deg2rad(jnp.asarray(peaks_deg, float))
+    z = jnp.zeros((), p.dtype)
+    return jr.Program(jnp.array([0.0, ramp, ramp + hold]), jnp.stack([z, p[0], p[0]]), jnp.stack([z, p[1], p[1]]))
+
+
+def sequence_program(peaks, *, ramp=1.0, hold=0.8, reset=-110.0, rest=1.0) -> jr.Program:
+    """The designed programs one after the other in one run: each move to its peaks and hold,
+    then a reset (both clamps to `reset` degrees, which snaps the strip back down, then to 0)
+    and `rest` T of rest before the next."""
+    t, aL, aR = [0.0], [0.0], [0.0]
+    for k, (pl, pr) in enumerate(peaks):
+        for (l, r), dt in [((pl, pr), ramp), ((pl, pr), hold)]:
+            t.append(t[-1] + dt)
+            aL.append(l)
+            aR.append(r)
+        if k < len(peaks) - 1:
+            for (l, r), dt in [((reset, reset), ramp), ((0.0, 0.0), ramp), ((0.0, 0.0), rest)]:
+                t.append(t[-1] + dt)
+                aL.append(l)
+                aR.append(r)
+    return jr.Program.from_degrees(t, aL, aR)
+
+
+def _loss(speeds, moved, reach, target, v_launch, v_spare, d_spare, margin):
+    others = jnp.arange(speeds.shape[0]) != target
+    miss = jnp.maximum(0.0, (1.0 + margin) * v_launch - speeds[target]) / v_launch
+    hit = jnp.where(others, jnp.maximum(0.0, speeds - (1.0 - margin) * v_spare) / v_spare, 0.0)
+    loss = miss**2 + jnp.sum(hit**2) + reach**2
+    if d_spare is not None:
+        push = jnp.where(others, jnp.maximum(0.0, moved - (1.0 - margin) * d_spare) / d_spare, 0.0)
+        loss = loss + jnp.sum(push**2)
+    return loss
+
+
+@dataclasses.dataclass
+class ProgramDesign:
+    """A designed program: `target`, `peaks_deg` (p_L, p_R), `speeds` (ball name -> peak
+    speed, v*) and `displaced` (ball name -> distance from its start at the end, L) at the
+    design mesh, `check` and `check_displaced` (the same at the finer re-check mesh), `reached`
+    (the goal holds at the design mesh), `confirmed` (and at the re-check), `history` (loss
+    per iteration), `iterations`, `seconds`, `codes` (the runs' result names)."""
+
+    target: str
+    peaks_deg: tuple
+    speeds: dict
+    check: dict
+    displaced: dict
+    check_displaced: dict
+    reached: bool
+    confirmed: bool
+    history: list
+    iterations: int
+    seconds: float
+    codes: tuple
+    v_launch: float
+    v_spare: float
+
+    def program(self, **kw) -> jr.Program:
+        return two_knot_program(self.peaks_deg, **kw)
+
+
+def _speeds_and_code(scene, bodies, peaks, theta0, t1, target):
+    """Peak speeds, the balls' displacements at the end, the target's reach term (its smallest gap beyond the contact layer, in
+    layer thicknesses: nonzero only while the strip never touches it) and the run's code."""
+    a = jr.actuate(scene, bodies, two_knot_program(peaks), theta0=theta0, t1=t1)
+    reach = jnp.maximum(0.0, a.min_clearance[target] - bodies.thickness) / bodies.thickness
+    moved = safe_norm(a.ball_position[-1] - bodies.position)
+    return a.peak_speed, moved, reach, a.result
+
+
+def design_program(scene, bodies, target, start_deg, *, v_launch=5.0, v_spare=1.0, d_spare=None, margin=0.1, steps=30,
+                   lr=3.0, t1=1.8, n_check=32, check_scene=None) -> ProgramDesign:
+    """Find peaks (p_L, p_R) that launch ball `target` faster than `v_launch` and leave the
+    others slower than `v_spare` (module docstring): Adam with learning rate `lr` degrees from
+    `start_deg`, at most `steps` iterations, stopping once the loss is zero (with `d_spare`, spared balls
+    must also end within it of their places); then a forward run
+    of the design on the finer `check_scene` (default: `scene` at `n_check` segments)."""
+    import optax
+
+    names = bodies.names
+    if target not in names:
+        raise ValueError(f"target must be one of {names}, got {target!r}")
+    k = names.index(target)
+    tic = time.perf_counter()
+    theta0 = jr.initial_state(scene, "down").theta
+
+    def loss_fn(p):
+        v, moved, reach, code = _speeds_and_code(scene, bodies, p, theta0, t1, k)
+        return _loss(v, moved, reach, k, v_launch, v_spare, d_spare, margin), (v, moved, code)
+
+    vg = jax.value_and_grad(loss_fn, has_aux=True)
+    opt = optax.adam(lr)
+    p = jnp.asarray(start_deg, float)
+    state = opt.init(p)
+    history = []
+    best = None
+    for it in range(steps + 1):
+        (loss, (v, moved, code)), g = vg(p)
+        loss = float(loss)
+        history.append(loss)
+        ok = code == jr.RESULTS.successful and math.isfinite(loss)
+        if ok and (best is None or loss < best[0]):
+            best = (loss, np.asarray(p), np.asarray(v), np.asarray(moved), jr.result_name(code))
+        if ok and loss == 0.0 or it == steps or not np.all(np.isfinite(np.asarray(g))):
+            break
+        upd, state = opt.update(g, state, p)
+        p = optax.apply_updates(p, upd)
+    loss, peaks, v, moved, code = best if best is not None else (
+        float("inf"), np.asarray(p), np.asarray(v), np.asarray(moved), jr.result_name(code))
+    speeds = {n: float(v[m]) for m, n in enumerate(names)}
+    displaced = {n: float(moved[m]) for m, n in enumerate(names)}
+    reached = bool(loss == 0.0)
+    fine = check_scene if check_scene is not None else jr.make_scene(
+        float(np.degrees(float(scene.strip.psi0))), float(scene.clamps.gap), s0=float(scene.strip.s0), n=n_check)
+    eq = jr.initial_state(fine, "down")
+    a = jr.actuate(fine, bodies, two_knot_program(peaks), theta0=eq.theta, t1=t1)
+    check = {n: float(a.peak_speed[m]) for m, n in enumerate(names)}
+    moved_fine = np.asarray(safe_norm(a.ball_position[-1] - bodies.position))
+    check_displaced = {n: float(moved_fine[m]) for m, n in enumerate(names)}
+    confirmed = bool(a.result == jr.RESULTS.successful and check[target] >= v_launch
+                     and all(s <= v_spare for n, s in check.items() if n != target)
+                     and (d_spare is None or all(x <= d_spare for n, x in check_displaced.items() if n != target)))
+    return ProgramDesign(target=target, peaks_deg=tuple(float(x) for x in peaks), speeds=speeds, check=check,
+                         displaced=displaced, check_displaced=check_displaced,
+                         reached=reached, confirmed=confirmed, history=history, iterations=len(history) - 1,
+                         seconds=time.perf_counter() - tic, codes=(code, jr.result_name(a.result)),
+                         v_launch=v_launch, v_spare=v_spare)
+
+
+@dataclasses.dataclass
+class Fig4Result:
+    """The three designs of `fig4_study` (in `FIG4_PROGRAMS` order) and their sequence run."""
+
+    designs: list
+    sequence: object
+    seconds: float
+
+    def table(self) -> str:
+        rows = ["| program | target | peaks (p_L, p_R) deg | iterations | " +
+                " | ".join(f"{n} (v*)" for n, _ in FIG4_BALLS) + " | re-check (finer mesh) | confirmed |",
+                "|---|---|---|---|" + "---|" * len(FIG4_BALLS) + "---|---|"]
+        for lab, d in zip("ABC", self.designs):
+            rows.append(f"| {lab} | {d.target} | ({d.peaks_deg[0]:.1f}, {d.peaks_deg[1]:.1f}) | {d.iterations} | "
+                        + " | ".join(f"{d.speeds[n]:.2f}" for n, _ in FIG4_BALLS) + " | "
+                        + ", ".join(f"{d.check[n]:.2f}" for n, _ in FIG4_BALLS) + f" | {d.confirmed} |")
+        return "\n".join(rows)
+
+
+def fig4_study(*, n=16, n_check=24, v_launch=5.0, v_spare=1.2, steps=25, sequence=True) -> Fig4Result:
+    """Design the paper's three programs (module docstring) and, with `sequence`, run them one
+    after the other on the same three balls at the design mesh."""
+    tic = time.perf_counter()
+    scene = jr.make_scene(60.0, 0.5, n=n)
+    bodies = fig4_bodies()
+    designs = [design_program(scene, bodies, t, FIG4_STARTS[t], v_launch=v_launch, v_spare=v_spare, steps=steps,
+                              n_check=n_check) for t in FIG4_PROGRAMS]
+    seq = None
+    if sequence:
+        prog = sequence_program([d.peaks_deg for d in designs])
+        seq = jr.actuate(scene, bodies, prog)
+    return Fig4Result(designs=designs, sequence=seq, seconds=time.perf_counter() - tic)
