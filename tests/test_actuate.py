@@ -273,11 +273,13 @@ def test_cli_actuate_bad_input(tmp_path, capsys, program, objects, message):
 def test_program_loss_is_zero_exactly_inside_the_goal():
     from jaxrod.design._programs import _loss
 
-    v = jnp.array([0.5, 0.9, 6.0])
-    assert float(_loss(v, 0.0, 2, 5.0, 1.0, 0.1)) == 0.0
-    assert float(_loss(v.at[2].set(5.4), 0.0, 2, 5.0, 1.0, 0.1)) > 0  # below (1 + margin) v_launch
-    assert float(_loss(v.at[0].set(0.95), 0.0, 2, 5.0, 1.0, 0.1)) > 0  # above (1 - margin) v_spare
-    assert float(_loss(v, 0.3, 2, 5.0, 1.0, 0.1)) == pytest.approx(0.09)
+    v, moved = jnp.array([0.5, 0.9, 6.0]), jnp.array([0.005, 0.0, 3.0])
+    assert float(_loss(v, moved, 0.0, 2, 5.0, 1.0, None, 0.1)) == 0.0
+    assert float(_loss(v.at[2].set(5.4), moved, 0.0, 2, 5.0, 1.0, None, 0.1)) > 0  # below (1 + margin) v_launch
+    assert float(_loss(v.at[0].set(0.95), moved, 0.0, 2, 5.0, 1.0, None, 0.1)) > 0  # above (1 - margin) v_spare
+    assert float(_loss(v, moved, 0.3, 2, 5.0, 1.0, None, 0.1)) == pytest.approx(0.09)  # the reach term
+    assert float(_loss(v, moved, 0.0, 2, 5.0, 1.0, 0.01, 0.1)) == 0.0  # the target may move
+    assert float(_loss(v, moved.at[0].set(0.0095), 0.0, 2, 5.0, 1.0, 0.01, 0.1)) > 0  # a spared ball may not
 
 
 @pytest.mark.slow  # ~60 s on 2 cores (the reverse-mode compile of a three-ball run); CI checks the
