@@ -29,6 +29,10 @@ print("NBTEST " + _json.dumps({"N": N, "gap": float(scene.clamps.gap), "figures"
 
 NUM = r"([-+]?\d+\.?\d*(?:[eE][-+]?\d+)?)"
 
+# nightly (`pytest -m slow`), like the other notebooks: 32 s on 2 cores in its own kernel; CI checks
+# the same library calls (states, stability, hysteresis, snap angles) in the unit tests
+pytestmark = pytest.mark.slow
+
 
 def test_notebook_01_getting_started():
     check(run_notebook("01_getting_started.ipynb", extra_cells=[FIGURES]))

@@ -131,7 +131,8 @@ def animate_actuation(act, path, *, fps=20):
     ok = tf <= t_end
     pos, balls, tf = np.asarray(act.positions)[ok], np.asarray(act.ball_frames)[ok], tf[ok]
     radius = np.asarray(act.ball_radius)
-    pts = np.concatenate([pos.reshape(-1, 2), balls[0]], 0)
+    # the strip over the whole run and the balls where they start (a launched ball leaves the view)
+    pts = np.concatenate([pos.reshape(-1, 2), balls[0] - radius[:, None], balls[0] + radius[:, None]], 0)
     lo, hi = pts.min(0) - 0.1, pts.max(0) + 0.1
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.set_xlim(lo[0], hi[0])
@@ -139,7 +140,8 @@ def animate_actuation(act, path, *, fps=20):
     ax.set_aspect("equal")
     (line,) = ax.plot([], [], "b-", lw=2)
     circles = [ax.add_patch(Circle(balls[0, m], radius[m], color=f"C{m + 1}", alpha=0.8)) for m in range(radius.size)]
-    labels = [ax.text(*balls[0, m], name, ha="center", va="center", fontsize=7) for m, name in enumerate(act.names)]
+    labels = [ax.text(*balls[0, m], name, ha="center", va="center", fontsize=7, clip_on=True)
+              for m, name in enumerate(act.names)]
     txt = ax.set_title("")
 
     def update(i):
