@@ -51,8 +51,6 @@ at the program's first angles).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import ClassVar
 
 import diffrax as dfx
 import equinox as eqx
@@ -64,7 +62,7 @@ from ._bodies import (Bodies, body_clearance, body_energy, friction_force, quadr
                       strip_clearance)
 from ._equations import Dissipation, check_scene, inverse_node_mass, kinematics, kinetic_energy, potential_energy, scene_at
 from ._program import Program
-from ._rattle import angles, project_velocity, rattle_forces, shake, substeps
+from ._rattle import FixedStepRattle, angles, project_velocity, rattle_forces, shake, substeps
 from ._simulate import DT_CAP
 from ..energy.contact import safe_norm
 from ..energy.geometry import discretize, scene_dtype
@@ -117,21 +115,13 @@ def _forces(t, theta, omega, x, v, xb, vb, args, q):
     return f - gx, clamp_power, fb, fs, _dissipated_power(t, omega, v, vb, args)
 
 
-class RattleBodies(dfx.AbstractSolver):
+class RattleBodies(FixedStepRattle):
     """RATTLE for the strip and velocity Verlet for the balls in one step (module docstring).
     State `y = (q, acc, xb, vb, J)`: `q` (2, N) angles and rates, `acc` (W, D), ball
     positions and velocities (M, 2), impulses (M, 2). `args = (scene, program, dissipation,
-    bodies, d)`."""
+    bodies, d)`; `quadrature` the contact's points per segment."""
 
     quadrature: int = 8
-    shake_iters: int = 4
-    shake_tol: float = 1e-10
-    substeps: int = 1
-    term_structure: ClassVar = dfx.AbstractTerm
-    interpolation_cls: ClassVar[Callable[..., dfx.LocalLinearInterpolation]] = dfx.LocalLinearInterpolation
-
-    def order(self, terms):
-        return 2
 
     def init(self, terms, t0, t1, y0, args):
         scene, _, _, _, d = args
@@ -172,8 +162,6 @@ class RattleBodies(dfx.AbstractSolver):
         y1 = (jnp.stack([th1, om1]), acc1, xb1, vb1, J + 0.5 * dt * (fs0 + fs1))
         return y1, (x1, v1, th1, f1, p1, fb1, fs1, pd1, mu), converged
 
-    def func(self, terms, t0, y0, args):
-        return terms.vf(t0, y0, args)
 
 
 def _no_field(t, y, args):

@@ -142,10 +142,10 @@ def substeps(k, t0, t1, carry, state, substep):
     return lax.fori_loop(0, k, sub, init) if k > 1 else sub(0, init)
 
 
-class Rattle(dfx.AbstractSolver):
-    """RATTLE for jaxrod's strip (module docstring). Needs `simulate`'s `args`
-    `(scene, protocol, dissipation, baumgarte, d)`; `baumgarte` is unused (the end
-    conditions are exact)."""
+class FixedStepRattle(dfx.AbstractSolver):
+    """What the RATTLE solvers share: the constraint solve's settings (`shake_iters` Newton
+    iterations to `shake_tol`), `substeps` RATTLE steps per diffrax step, second order, linear
+    interpolation between steps, fixed steps only."""
 
     shake_iters: int = 4
     shake_tol: float = 1e-10
@@ -155,6 +155,15 @@ class Rattle(dfx.AbstractSolver):
 
     def order(self, terms):
         return 2
+
+    def func(self, terms, t0, y0, args):
+        return terms.vf(t0, y0, args)
+
+
+class Rattle(FixedStepRattle):
+    """RATTLE for jaxrod's strip (module docstring). Needs `simulate`'s `args`
+    `(scene, protocol, dissipation, baumgarte, d)`; `baumgarte` is unused (the end
+    conditions are exact)."""
 
     def init(self, terms, t0, t1, y0, args):
         scene, _, _, _, d = args
@@ -194,6 +203,3 @@ class Rattle(dfx.AbstractSolver):
         f1, p1 = rattle_forces(t1, th1, omh, x1, vh, args)
         v1 = project_velocity(x1, vh + 0.5 * dt * invm[:, None] * f1, invm)
         return w0 + 0.5 * dt * (p0 + p1), (x1, v1, th1, f1, p1, mu), converged
-
-    def func(self, terms, t0, y0, args):
-        return terms.vf(t0, y0, args)
