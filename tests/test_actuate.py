@@ -294,3 +294,12 @@ def test_designed_program_launches_its_target_and_spares_the_others():
     assert d.reached and d.confirmed, d
     assert d.history[0] > 1.0 and d.history[-1] == 0.0
     assert d.check["right"] >= 5.0 and d.check["left"] <= 1.2 and d.check["centre"] <= 1.2
+
+
+def test_traced_contact_law_is_refused_with_a_clear_message(scene, down):
+    """The contact law sets the step, so it must be concrete: under jit a clear ValueError."""
+    def f(k):
+        return jr.actuate(scene, jr.Bodies([ball()], stiffness=k), UP, theta0=down, t1=T1).launch_speed
+
+    with pytest.raises(ValueError, match="bodies: stiffness, thickness, radius and mass"):
+        jax.jit(f)(1e5)

@@ -58,8 +58,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._bodies import (Bodies, body_clearance, body_energy, friction_force, quadrature_points, strip_body_energy,
-                      strip_clearance)
+from ._bodies import Bodies, body_clearance, body_energy, friction_force, quadrature_points, strip_body_energy
 from ._equations import Dissipation, check_scene, inverse_node_mass, kinematics, kinetic_energy, potential_energy, scene_at
 from ._program import Program
 from ._rattle import FixedStepRattle, angles, project_velocity, rattle_forces, shake, substeps
@@ -347,7 +346,7 @@ def _run(scene, bodies, program, theta0, dissipation, t1, dt, substeps, n_sample
             body_energy=strip_body_energy(x, xb, bodies, quad) + body_energy(xb, bodies, scene.gravity),
             work=acc[0], dissipated=acc[1], alpha_left=aL, alpha_right=aR,
             ball_position=xb, ball_velocity=vb, strip_force=fs, impulse=J,
-            ball_clearance=body_clearance(x, xb, bodies), strip_gap=strip_clearance(x, xb, bodies))
+            ball_clearance=body_clearance(x, xb, bodies))
 
     def frames(t, y, a):
         q, _, xb, _, _ = y
@@ -453,7 +452,12 @@ def actuate(scene, bodies: Bodies, program: Program, *, theta0=None, state="down
     st = scene.strip
     T = float(st.length) ** 2 * math.sqrt(float(st.line_density) / float(st.bending_stiffness))
     dt = min(courant * frac_min**2, DT_CAP) * T
-    dt = min(dt, BODY_COURANT / _body_omega(bodies, scene))
+    try:
+        omega_b = _body_omega(bodies, scene)
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+        raise ValueError("bodies: stiffness, thickness, radius and mass set the step and must be concrete "
+                         "(call actuate outside jit; positions, velocities and the program may be traced)") from None
+    dt = min(dt, BODY_COURANT / omega_b)
     eta = float(dissipation.viscosity)
     if eta > 0:  # the explicit hinge viscosity's own limit (module docstring)
         h_min = frac_min * float(st.length)

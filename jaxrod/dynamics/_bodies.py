@@ -230,10 +230,4 @@ def body_clearance(x, xb, bodies):
     return d
 
 
-def strip_clearance(x, xb, bodies):
-    """Per ball, the gap to the strip alone (M,) (see `body_clearance`)."""
-    a, b = x[:-1], x[1:]
-    return jax.vmap(lambda c: jnp.min(point_segment_distance(c[None, :], a, b)))(xb) - bodies.radius
-
-
 __all__ = ["Ball", "Bodies", "Floor", "Table", "BODY_STIFFNESS", "BODY_THICKNESS"]
