@@ -136,15 +136,20 @@ class RattleBodies(FixedStepRattle):
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         del made_jump  # fixed steps only
-        y1, st1, ok = substeps(self.substeps, t0, t1, y0, solver_state,
-                               lambda ta, tb, y, st: self._substep(ta, tb, y, args, st))
+        rest, st1, ok = substeps(self.substeps, t0, t1, y0[1:], solver_state,
+                                 lambda ta, tb, r, st: self._substep(ta, tb, r, args, st))
+        x1, v1, th1 = st1[:3]
+        _, om1 = angles(x1, v1, th1)
+        y1 = (jnp.stack([th1, om1]), *rest)
         result = dfx.RESULTS.where(ok, dfx.RESULTS.successful, dfx.RESULTS.nonlinear_divergence)
         return y1, None, dict(y0=y0, y1=y1), st1, result
 
-    def _substep(self, t0, t1, y0, args, st):
+    def _substep(self, t0, t1, rest, args, st):
+        """One step; `rest` = (acc, xb, vb, J), the state but the angles (which the macro step
+        reads off the solver state once at its end)."""
         _, _, _, bodies, d = args
         x0, v0, th0, f0, p0, fb0, fs0, pd0, mu = st
-        _, acc, xb0, vb0, J = y0
+        acc, xb0, vb0, J = rest
         invm = inverse_node_mass(d)
         minv = 1.0 / bodies.mass
         dt = t1 - t0
@@ -156,11 +161,9 @@ class RattleBodies(FixedStepRattle):
         f1, p1, fb1, fs1, pd1 = _forces(t1, th1, omh, x1, vh, xb1, vbh, args, self.quadrature)
         v1 = project_velocity(x1, vh + 0.5 * dt * invm[:, None] * f1, invm)
         vb1 = vbh + 0.5 * dt * minv[:, None] * fb1
-        _, om1 = angles(x1, v1, th1)
         acc1 = acc + 0.5 * dt * jnp.stack([p0 + p1, pd0 + pd1])
-        y1 = (jnp.stack([th1, om1]), acc1, xb1, vb1, J + 0.5 * dt * (fs0 + fs1))
-        return y1, (x1, v1, th1, f1, p1, fb1, fs1, pd1, mu), converged
-
+        rest1 = (acc1, xb1, vb1, J + 0.5 * dt * (fs0 + fs1))
+        return rest1, (x1, v1, th1, f1, p1, fb1, fs1, pd1, mu), converged
 
 
 def _no_field(t, y, args):

@@ -157,12 +157,8 @@ def quadrature_points(bodies, h_max) -> int:
     r"""Quadrature points per segment of the strip-ball contact (static), for segments up to
     `h_max` long: the spacing is at most a quarter of the narrowest contact patch's half-width
     $\sqrt{2R\delta}$, and at least 4 points."""
-    try:
-        r = float(np.min(np.asarray(bodies.radius)))
-        delta = float(bodies.thickness)
-    except (TypeError, jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
-        return 16
-    return int(max(4, math.ceil(4.0 * float(h_max) / math.sqrt(2.0 * r * delta))))
+    r = float(np.min(np.asarray(bodies.radius)))
+    return int(max(4, math.ceil(4.0 * float(h_max) / math.sqrt(2.0 * r * float(bodies.thickness)))))
 
 
 def strip_body_energy(x, xb, bodies, q):
