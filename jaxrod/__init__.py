@@ -24,6 +24,7 @@ from .results import result_name as result_name
 # model: what the strip is
 from .model import Clamps as Clamps
 from .model import Contact as Contact
+from .model import Creases as Creases
 from .model import Gravity as Gravity
 from .model import make_scene as make_scene
 from .model import Mesh as Mesh
@@ -49,6 +50,7 @@ from .statics import curvature as curvature
 from .statics import dense_reduced_hessian as dense_reduced_hessian
 from .statics import energies as energies
 from .statics import Equilibrium as Equilibrium
+from .statics import crease_heights as crease_heights
 from .statics import fold_height as fold_height
 from .statics import hessian as hessian
 from .statics import initial_state as initial_state

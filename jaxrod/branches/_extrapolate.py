@@ -80,7 +80,7 @@ class ExtrapolatedSnapAngles(eqx.Module):
 def refined_scene(scene: Scene, factor: int = 2) -> Scene:
     """The same scene on a mesh `factor` times finer (same grading)."""
     m = scene.mesh
-    return Scene(scene.strip, scene.clamps, Mesh(factor * m.n, m.refine, m.width), scene.stretching, scene.gravity,
+    return Scene(scene.strip, scene.clamps, Mesh(factor * m.n, m.refine, m.width, m.centres), scene.stretching, scene.gravity,
                  scene.contact)
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import math
 
-from ._main import EXIT_NOT_CONVERGED, EXIT_OK, InputError, add_scene_args, make_scene_from_args
+from ._main import EXIT_NOT_CONVERGED, EXIT_OK, InputError, add_scene_args, creases_record, make_scene_from_args
 
 DEFAULT_OBJECTS = {
     "balls": [
@@ -112,7 +112,8 @@ def _cmd_actuate(args):
                           final_position=[float(v) for v in np.asarray(act.ball_position[-1, m])])
                for m, name in enumerate(act.names)},
         program=program.to_json(), t1=float(np.nanmax(np.where(np.isfinite(np.asarray(act.t)), np.asarray(act.t), np.nan))),
-        num_steps=int(act.num_steps), psi0_deg=args.psi0, gap=args.gap, n=args.n, state=state,
+        num_steps=int(act.num_steps), psi0_deg=args.psi0, creases=creases_record(scene), gap=args.gap, n=args.n,
+        state=state,
         dissipation="none" if args.undamped else dict(damping=jr.ACTUATOR_DAMPING, viscosity=jr.ACTUATOR_VISCOSITY),
     )
     if args.animate:

@@ -30,7 +30,7 @@ from ..dynamics import NUDGE
 from ..results import RESULTS
 from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _contact_record, _result_name,
                     add_contact_args, add_distributed_args, add_scene_args, clearance_separation, contact_mode,
-                    make_scene_from_args, needs_contact)
+                    creases_record, make_scene_from_args, needs_contact)
 
 PAPER_FIT = (42.59, 30.38, 5.00)
 
@@ -162,7 +162,10 @@ def _record(start, tr, phys=None):
         converged=solved,
         result=_result_name(tr.result),
         units="L = B = lambda = 1: speeds in v*, times in T = L/v*, energies in B/L",
+        creases=creases_record(start.scene),
     )
+    # each crease's peak speed (the centred crease first), beside the fold's v_s at L/2
+    rec["v_s_creases"] = [f(v) for v in np.asarray(tr.v_s_creases)] if rec["creases"] else []
     if phys is not None:
         vstar, T = phys
         rec.update(v_s_m_per_s=f(float(tr.v_s) * vstar), t_snap_s=f(float(tr.t_cross) * T),

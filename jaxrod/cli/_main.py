@@ -53,7 +53,7 @@ def _quiet():
     for name in ("jax", "jaxlib", "jax._src.xla_bridge", "equinox", "absl"):
         logging.getLogger(name).setLevel(logging.ERROR)
     for mod in ("jax", "jaxlib", "equinox", "jaxtyping", "matplotlib"):
-        warnings.filterwarnings("ignore", module=mod)
+        warnings.filterwarnings("ignore", module=rf"{mod}(\.|$)")  # not jaxrod itself
     warnings.filterwarnings("ignore", category=UserWarning, message=".*(GPU|TPU|CUDA|cuda).*")
     warnings.filterwarnings("ignore", category=FutureWarning)
     warnings.filterwarnings("ignore", category=DeprecationWarning)
@@ -64,10 +64,47 @@ def _number(text):
     return float(text)
 
 
+def _crease(text):
+    """`C:PSI0[:S0]` -> a tuple of floats."""
+    parts = text.split(":")
+    try:
+        vals = tuple(float(v) for v in parts)
+    except ValueError:
+        vals = ()
+    if len(vals) not in (2, 3):
+        raise argparse.ArgumentTypeError(f"crease: expected C:PSI0 or C:PSI0:S0, got {text!r}")
+    return vals
+
+
+def resolve_scene_args(args):
+    """Fill the defaults that depend on other options: `--psi0` is 60 alone, 180 (no centred
+    crease) when `--crease` is given."""
+    if hasattr(args, "crease") and getattr(args, "psi0", 0.0) is None:
+        args.psi0 = 180.0 if args.crease else DEFAULTS["psi0"]
+    return args
+
+
+def creases_record(scene):
+    """The scene's creases for the JSON output: `[{"position", "psi0_deg", "s0"}, ...]` in
+    `Strip.crease_list` order, the centred crease first (the flat strip lists none)."""
+    import numpy as np
+
+    st = scene.strip
+    pos, ang, wid = (np.asarray(v, float) for v in st.crease_list())
+    L = float(st.length)
+    return [{"position": float(c) / L, "psi0_deg": math.degrees(float(a)), "s0": float(w) / L}
+            for c, a, w in zip(pos, ang, wid)] if (st.creases is not None or float(st.psi0) < math.pi) else []
+
+
 def add_scene_args(p):
     g = p.add_argument_group("strip and clamps (L = 1, angles in degrees)")
-    g.add_argument("--psi0", type=_number, default=DEFAULTS["psi0"], metavar="DEG",
-                   help="fold angle Psi0 in (0, 180] degrees; 180 = flat strip (default %(default)g)")
+    g.add_argument("--psi0", type=_number, default=None, metavar="DEG",
+                   help="fold angle Psi0 in (0, 180] degrees of the crease at L/2; 180 = flat strip "
+                        f"(default {DEFAULTS['psi0']:g}, or 180 when --crease is given)")
+    g.add_argument("--crease", type=_crease, action="append", default=None, metavar="C:PSI0[:S0]",
+                   help="a crease at s = C (in L, 0 < C < 1) of fold angle PSI0 degrees and width S0 "
+                        "(default --s0); repeat for several. They add to the centred --psi0 crease, "
+                        "which is absent (180) unless --psi0 is given")
     g.add_argument("--gap", type=_number, default=DEFAULTS["gap"], metavar="G",
                    help="clamp gap G/L in (0, 1) (default %(default)g)")
     g.add_argument("--alpha", type=_number, default=DEFAULTS["alpha"], metavar="DEG",
@@ -203,7 +240,9 @@ def make_scene_from_args(args, contact=None):
             raise InputError(f"gravity: {e}") from None
     try:
         return jr.make_scene(args.psi0, args.gap, args.alpha, alpha_right_deg=args.alpha_right, s0=args.s0,
-                             n=args.n, refine=args.refine, stretching=stretching, gravity=gravity, contact=model)
+                             n=args.n, refine=args.refine, stretching=stretching, gravity=gravity, contact=model,
+                             creases=[c if len(c) == 3 else (*c, args.s0) for c in args.crease]
+                             if getattr(args, "crease", None) else None)
     except ValueError as e:
         raise InputError(str(e)) from None
 
@@ -270,7 +309,9 @@ def _record(eq, state, k=4, angles_deg=None):
         "refine": float(sc.mesh.refine),
         "stretching": None if sc.stretching is None else float(sc.stretching.stiffness),
         "gravity": None if sc.gravity is None else float(sc.gravity.g),
+        "creases": creases_record(sc),
         "fold_height": _finite(jr.fold_height(eq)),
+        "crease_heights": [_finite(v) for v in np.asarray(jr.crease_heights(eq))],
         "bending_energy": _finite(en["bending"]),
         "stretching_energy": _finite(en["stretching"]),
         "gravity_energy": _finite(en["gravity"]),
@@ -290,7 +331,7 @@ def _record(eq, state, k=4, angles_deg=None):
     return rec
 
 
-_OBSERVABLES = ("fold_height", "bending_energy", "stretching_energy", "gravity_energy", "contact_energy", "total_energy",
+_OBSERVABLES = ("fold_height", "crease_heights", "bending_energy", "stretching_energy", "gravity_energy", "contact_energy", "total_energy",
                 "compression", "min_eigenvalue", "eigenvalues", "eigenvalue_parity", "num_unstable")
 
 
@@ -518,7 +559,7 @@ def _cmd_snap_angles(args):
         return float(np.degrees(x)) if deg else x
 
     rec = {"psi0_deg": args.psi0, "gap": args.gap, "s0": args.s0, "n": args.n, "refine": args.refine,
-           "extrapolated": bool(args.extrapolate), **_contact_record(scene)}
+           "creases": creases_record(scene), "extrapolated": bool(args.extrapolate), **_contact_record(scene)}
     if args.extrapolate:
         rec["n_fine"] = jr.refined_scene(scene).mesh.n
     for name in ("up", "down"):
@@ -629,8 +670,10 @@ def main(argv=None):
         argv = ["demo", *argv]
     with warnings.catch_warnings():
         _quiet()
+        # the library's warnings (an under-resolved crease, ...) as one line each
+        warnings.showwarning = lambda message, *a, **k: print(f"jaxrod: warning: {message}", file=sys.stderr)
         try:
-            args = _build_parser().parse_args(argv)
+            args = resolve_scene_args(_build_parser().parse_args(argv))
             if hasattr(args, "coordinator"):
                 start_distributed(args)  # before JAX starts its backend
             _enable_x64()  # before anything is computed

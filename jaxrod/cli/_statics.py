@@ -26,7 +26,8 @@ def _fin(x, deg=False):
 
 
 def _cmd_hysteresis(args):
-    from ._main import EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _result_name, make_scene_from_args
+    from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _result_name, creases_record,
+                        make_scene_from_args)
 
     scene = make_scene_from_args(args)
     import numpy as np
@@ -34,7 +35,8 @@ def _cmd_hysteresis(args):
     import jaxrod as jr
 
     h = jr.hysteresis(_array_leaves(scene))
-    rec = {"psi0_deg": args.psi0, "gap": args.gap, "s0": args.s0, "n": args.n, "refine": args.refine}
+    rec = {"psi0_deg": args.psi0, "gap": args.gap, "s0": args.s0, "n": args.n, "refine": args.refine,
+           "creases": creases_record(scene)}
     for name, p, eb, ea in (("up", h.snap.up, h.energy_before_up, h.energy_after_up),
                             ("down", h.snap.down, h.energy_before_down, h.energy_after_down)):
         rec[f"snaps_{name}"] = bool(p.snaps)

@@ -46,7 +46,7 @@ import numpy as np
 
 from ..energy.bending import bending_energy, turning_angles
 from ..energy.contact import contact_energy, contact_energy_nodes
-from ..energy.geometry import discretize
+from ..energy.geometry import at_arclength, discretize
 from ..linalg.batched import tridiagonal_solve
 from .._misc import check_bool, check_int, check_number, check_param, check_sign, is_concrete
 
@@ -285,7 +285,8 @@ def vector_field(t, y, args):
 
 
 def observables(t, y, scene, protocol, d=None):
-    """Fold height, fold speed |dx/dt| at s = L/2, bending and kinetic energy, max node speed,
+    """Fold height, fold speed |dx/dt| at s = L/2, each crease's height and speed (at its
+    arclength, `Strip.crease_list` order), bending and kinetic energy, node speeds,
     end-constraint error."""
     theta, omega = y[0], y[1]
     aL, aR, _, _ = protocol.angles(t)
@@ -297,8 +298,11 @@ def observables(t, y, scene, protocol, d=None):
     k = sc.mesh.n // 2
     speed = safe_norm(v)
     target = jnp.stack([sc.clamps.gap, jnp.zeros((), x.dtype)])
+    cpos = sc.strip.crease_list()[0].astype(x.dtype)
     return dict(
         fold_height=x[k, 1],
+        crease_height=at_arclength(x, d.s, cpos)[:, 1],
+        crease_speed=safe_norm(at_arclength(v, d.s, cpos)),
         fold_velocity=v[k],
         fold_speed=speed[k],
         bending=bending_energy(theta, sc, d),

@@ -64,7 +64,9 @@ class Trajectory(eqx.Module):
     Fine grid `t` (n_fine,; times after the stop are `inf`): `fold_height`, `fold_speed`,
     `bending`, `potential`, `kinetic`, `clamp_work`, `constraint` (end-position error).
     Frames `t_frames` (n_frames,): `theta` (n_frames, N), `positions` (n_frames, N+1, 2),
-    `speed` (n_frames, N+1) node speeds. Scalars: `v_s` (peak fold speed, units of the
+    `speed` (n_frames, N+1) node speeds. Each crease (`Strip.crease_list` order, m of them):
+    `crease_height`, `crease_speed` (n_fine, m) and `v_s_creases` (m,), its peak speed.
+    Scalars: `v_s` (peak fold speed at L/2, units of the
     scene, i.e. v* when L = B = lambda = 1), `t_peak`, `t_cross` (fold height crosses 0),
     `t_end`, `snapped`, `kinetic_peak`, `energy_drift` (max |E_k+V-W - E(0)| / V(0), NaN when
     damped), `num_steps`, `result` (a [`jaxrod.RESULTS`][] code: `successful` for a run that
@@ -87,6 +89,9 @@ class Trajectory(eqx.Module):
     speed: jax.Array
     v_s: jax.Array
     t_peak: jax.Array
+    crease_height: jax.Array
+    crease_speed: jax.Array
+    v_s_creases: jax.Array
     t_cross: jax.Array
     t_end: jax.Array
     snapped: jax.Array
@@ -303,6 +308,7 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     def obs(t, y, a):
         o = observables(t, y[0], scene, protocol, d)
         return dict(fold_height=o["fold_height"], fold_speed=o["fold_speed"], vy=o["fold_velocity"][1],
+                    crease_height=o["crease_height"], crease_speed=o["crease_speed"],
                     bending=o["bending"], potential=o["potential"], kinetic=o["kinetic"],
                     constraint=o["constraint"], work=y[1])
 
@@ -379,6 +385,7 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     t_end = jnp.max(jnp.where(jnp.isfinite(sol.ts[0]), sol.ts[0], 0.0))
     t_end = jnp.maximum(t_end, 0.0)
     v_s, t_peak = _refine_peak(ts, o["fold_speed"])
+    v_s_creases = jax.vmap(lambda f: _refine_peak(ts, f)[0], in_axes=1)(o["crease_speed"])
     fh = o["fold_height"]
     # first crossing of the fold height through 0 in the snapping direction
     s = direction * fh
@@ -396,6 +403,7 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
         t=ts, fold_height=fh, fold_speed=o["fold_speed"], bending=o["bending"], potential=o["potential"],
         kinetic=o["kinetic"], clamp_work=o["work"], constraint=o["constraint"], t_frames=tf,
         theta=fr["theta"], positions=fr["positions"], speed=fr["speed"], v_s=v_s, t_peak=t_peak,
+        crease_height=o["crease_height"], crease_speed=o["crease_speed"], v_s_creases=v_s_creases,
         t_cross=t_cross, t_end=t_end, snapped=snapped, kinetic_peak=jnp.max(kin), energy_drift=drift,
         num_steps=sol.stats["num_steps"] * substeps,  # RATTLE steps (substeps: 1 otherwise)
         result=_verdict(sol, jnp.all(jnp.where(jnp.isfinite(sol.ts[0]), jnp.isfinite(E), True))),

@@ -144,7 +144,8 @@ class SpeedRun(eqx.Module):
     `stopped` (the run ended at the snap's overshoot before `t1`), `peak_before_stop`;
     `result`: `successful` where `v_s` is valid, else the snap path's code (or `no_snap`,
     or `derivative_unavailable` where its refinement failed), the trajectory's code,
-    `snap_not_resolved`, or `energy_drift` (above `max_drift`)."""
+    `snap_not_resolved`, or `energy_drift` (above `max_drift`); `v_s_creases` (m,): each
+    crease's peak speed during the snap (`Strip.crease_list` order; NaN where not valid)."""
 
     v_s: jax.Array
     v_s_raw: jax.Array
@@ -160,6 +161,7 @@ class SpeedRun(eqx.Module):
     stopped: jax.Array
     peak_before_stop: jax.Array
     result: RESULTS
+    v_s_creases: jax.Array
 
 
 def _run(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
@@ -199,7 +201,7 @@ def _run(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
                                     RESULTS.where(ok, good, RESULTS.energy_drift))))
     return SpeedRun(jnp.where(ok, v_raw, jnp.nan), v_raw, ok, jnp.where(valid, path.alpha_c, jnp.nan),
                     path.kind, tr.t_peak * T, tr.t_end * T, tr.energy_drift, tr.num_steps, valid, tr.snapped,
-                    stopped, peak_ok, result)
+                    stopped, peak_ok, result, jnp.where(ok, tr.v_s_creases / T, jnp.nan))
 
 
 @eqx.filter_custom_jvp

@@ -30,8 +30,9 @@ class Discrete(NamedTuple):
 
 def scene_dtype(scene):
     st, cl = scene.strip, scene.clamps
+    extra = () if st.creases is None else (st.creases.positions, st.creases.angles, st.creases.widths)
     return jnp.result_type(st.psi0, st.s0, st.length, st.bending_stiffness, cl.gap,
-                           cl.alpha_left, cl.alpha_right, float)
+                           cl.alpha_left, cl.alpha_right, *extra, float)
 
 
 def discretize(scene) -> Discrete:
@@ -49,3 +50,12 @@ def discretize(scene) -> Discrete:
     tl = jnp.asarray(cl.alpha_left, dtype)
     tr = -jnp.asarray(cl.alpha_right, dtype)
     return Discrete(s, h, mid, ell, phi0, node_mass, tl, tr)
+
+
+def at_arclength(values, s, where):
+    """Node `values` (N+1, ...) linearly interpolated to the arclengths `where` (m,), with
+    node arclengths `s` (N+1,); differentiable in `values` and in `where`."""
+    i = jnp.clip(jnp.searchsorted(s, where, side="right") - 1, 0, s.shape[0] - 2)
+    w = (where - s[i]) / (s[i + 1] - s[i])
+    w = w.reshape(w.shape + (1,) * (values.ndim - 1))
+    return (1.0 - w) * values[i] + w * values[i + 1]

@@ -1,4 +1,4 @@
-"""What the strip is: its material and crease (`Strip`), mesh (`Mesh`), clamps (`Clamps`),
+"""What the strip is: its material and creases (`Strip`, `Creases`), mesh (`Mesh`), clamps (`Clamps`),
 optional stretching, gravity and self-contact (`Contact`), and the `Scene` that bundles them
 (`make_scene`).
 
@@ -7,6 +7,8 @@ The bottom layer: it imports nothing else from jaxrod.
 
 from ._scene import Clamps as Clamps
 from ._scene import Contact as Contact
+from ._scene import Creases as Creases
+from ._scene import parse_creases as parse_creases
 from ._scene import CONTACT_STIFFNESS as CONTACT_STIFFNESS
 from ._scene import CONTACT_THICKNESS as CONTACT_THICKNESS
 from ._scene import Gravity as Gravity

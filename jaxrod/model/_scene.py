@@ -33,12 +33,124 @@ def _leaf(x):
     return x
 
 
+def _crease_profile(s, centre, psi, width):
+    r"""One crease's natural tangent angle $\frac{\Psi-\pi}{2}\tanh\frac{s-c}{s_0}$."""
+    return 0.5 * (psi - jnp.pi) * jnp.tanh((s - centre) / width)
+
+
+class Creases(eqx.Module):
+    r"""A set of $m$ creases: crease $k$ at arclength $c_k$ (a length, in $(0, L)$) with
+    fold angle $\Psi_k$ (radians, interior angle, in $(0,\pi]$) and fold width $s_{0,k}$.
+    Each adds the single-crease profile of MODEL.md centred at its own $c_k$ to the
+    strip's natural tangent angle,
+
+    $$\theta_0(s) \mathrel{+}= \sum_k \frac{\Psi_k-\pi}{2}\tanh\frac{s-c_k}{s_{0,k}},$$
+
+    so every crease points up (+y) in the rest shape, and the total turning of crease $k$
+    is $\Psi_k - \pi$. `positions`, `angles` and `widths` are arrays of shape (m,), pytree
+    leaves: derivatives with respect to every $c_k$, $\Psi_k$, $s_{0,k}$ are available
+    (at a fixed mesh).
+
+    Rule for overlapping creases: two creases overlap when $|c_k-c_l| < 2(s_{0,k}+s_{0,l})$;
+    a cluster of overlapping creases acts as one crease of fold angle
+    $\pi-\sum_k(\pi-\Psi_k)$, which must stay positive (`ValueError` otherwise). Two
+    creases at the same place are one crease of the summed angle.
+    """
+
+    positions: jnp.ndarray
+    angles: jnp.ndarray
+    widths: jnp.ndarray
+
+    def __init__(self, positions, angles, widths=None, *, length=1.0):
+        pos = np.atleast_1d(positions) if is_concrete_pair(positions) else jnp.atleast_1d(positions)
+        ang = np.atleast_1d(angles) if is_concrete_pair(angles) else jnp.atleast_1d(angles)
+        if widths is None:
+            widths = 0.02 * length
+        wid = np.atleast_1d(widths) if is_concrete_pair(widths) else jnp.atleast_1d(widths)
+        for name, v in (("crease positions", pos), ("crease angles", ang), ("crease widths", wid)):
+            if v.ndim != 1 or v.shape[0] < 1:
+                raise ValueError(f"{name} must be a non-empty 1-d sequence, got shape {tuple(v.shape)}")
+        m = pos.shape[0]
+        if ang.shape[0] == 1 and m > 1:
+            ang = jnp.broadcast_to(ang, (m,)) if not isinstance(ang, np.ndarray) else np.broadcast_to(ang, (m,))
+        if wid.shape[0] == 1 and m > 1:
+            wid = jnp.broadcast_to(wid, (m,)) if not isinstance(wid, np.ndarray) else np.broadcast_to(wid, (m,))
+        if ang.shape[0] != m or wid.shape[0] != m:
+            raise ValueError(f"crease angles and widths must have one entry per crease position ({m}), "
+                             f"got {ang.shape[0]} and {wid.shape[0]}")
+        if is_concrete_pair(pos, ang, wid, length):
+            L = float(length)
+            pos, ang, wid = (np.asarray(v, float) for v in (pos, ang, wid))
+            for k in range(m):
+                check_param(f"crease {k} position", float(pos[k]), lo=0.0, hi=L)
+                check_param(f"crease {k} angle", math.degrees(float(ang[k])), lo=0.0, hi=180.0, hi_open=False,
+                            unit=" deg")
+                check_param(f"crease {k} width", float(wid[k]), lo=0.0)
+            _check_overlaps(pos, ang, wid)
+        self.positions = jnp.asarray(pos)
+        self.angles = jnp.asarray(ang)
+        self.widths = jnp.asarray(wid)
+
+    @classmethod
+    def from_degrees(cls, positions, angles_deg, widths=None, *, length=1.0):
+        """Creases with fold angles in degrees (positions and widths as lengths)."""
+        return cls(positions, np.radians(np.asarray(angles_deg, float)), widths, length=length)
+
+    @property
+    def count(self) -> int:
+        return int(self.positions.shape[0])
+
+    def natural_angle(self, s):
+        r"""$\sum_k \frac{\Psi_k-\pi}{2}\tanh\frac{s-c_k}{s_{0,k}}$ at arclengths `s`."""
+        s = jnp.asarray(s)
+        prof = _crease_profile(s[..., None], self.positions, self.angles, self.widths)
+        return jnp.sum(prof, axis=-1)
+
+    def is_mirror_symmetric(self, length=1.0, tol=1e-12) -> bool:
+        """Whether the set equals its mirror image about $s = L/2$ (each crease has a partner
+        at $L - c_k$ with the same angle and width)."""
+        pos, ang, wid = (np.asarray(v, float) for v in (self.positions, self.angles, self.widths))
+        for k in range(pos.shape[0]):
+            match = ((np.abs(pos - (float(length) - pos[k])) < tol) & (np.abs(ang - ang[k]) < tol)
+                     & (np.abs(wid - wid[k]) < tol))
+            if not match.any():
+                return False
+        return True
+
+    def to_list(self, length=1.0):
+        """`[{"position": c_k / L, "psi0_deg": ..., "s0": s0_k / L}, ...]` (JSON-ready)."""
+        L = float(length)
+        return [{"position": float(c) / L, "psi0_deg": math.degrees(float(a)), "s0": float(w) / L}
+                for c, a, w in zip(np.asarray(self.positions), np.asarray(self.angles), np.asarray(self.widths))]
+
+
+def _check_overlaps(pos, ang, wid):
+    order = np.argsort(pos)
+    p, a, w = pos[order], ang[order], wid[order]
+    start = 0
+    for k in range(1, len(p) + 1):
+        if k == len(p) or p[k] - p[k - 1] >= 2.0 * (w[k] + w[k - 1]):
+            deficit = float(np.sum(np.pi - a[start:k]))
+            if deficit >= np.pi:
+                names = ", ".join(f"{q:g}" for q in p[start:k])
+                raise ValueError(f"creases at {names} overlap (closer than 2 (s0_k + s0_l)) and fold by "
+                                 f"{math.degrees(deficit):g} deg together; overlapping creases must fold by "
+                                 f"less than 180 deg in all")
+            start = k
+
+
 class Strip(eqx.Module):
     r"""A strip of length $L$, bending stiffness $B$, mass per length $\lambda$, with
     one crease of fold angle $\Psi_0$ (radians, interior angle; $\pi$ = flat) and fold
-    width $s_0$ (a length), centred at $s=L/2$.
+    width $s_0$ (a length), centred at $s=L/2$, and optionally a set of further creases
+    anywhere (`creases`, a [`jaxrod.Creases`][]) whose profiles add to the centred one's:
 
-    Defaults are the nondimensional units of MODEL.md: $L=B=\lambda=1$, $s_0=0.02L$.
+    $$\theta_0(s) = \frac{\Psi_0-\pi}{2}\tanh\frac{s-L/2}{s_0}
+      + \sum_k \frac{\Psi_k-\pi}{2}\tanh\frac{s-c_k}{s_{0,k}}.$$
+
+    A strip of creases elsewhere leaves `psi0` at $\pi$ (no centred crease; that term is
+    then exactly zero). Defaults are the nondimensional units of MODEL.md:
+    $L=B=\lambda=1$, $s_0=0.02L$.
     """
 
     psi0: float = math.pi
@@ -46,8 +158,11 @@ class Strip(eqx.Module):
     length: float = 1.0
     bending_stiffness: float = 1.0
     line_density: float = 1.0
+    creases: Creases | None = None
+    centred: bool = eqx.field(static=True, default=True)
 
-    def __init__(self, psi0=math.pi, s0=None, length=1.0, bending_stiffness=1.0, line_density=1.0):
+    def __init__(self, psi0=math.pi, s0=None, length=1.0, bending_stiffness=1.0, line_density=1.0,
+                 creases=None):
         check_param("length", length, lo=0.0)
         check_param("psi0", psi0, lo=0.0, hi=180.0, hi_open=False, unit=" deg", scale=180.0 / math.pi)
         check_param("bending_stiffness", bending_stiffness, lo=0.0)
@@ -55,11 +170,24 @@ class Strip(eqx.Module):
         if s0 is None:
             s0 = 0.02 * length
         check_param("s0", s0, lo=0.0)
+        if creases is not None and not isinstance(creases, Creases):
+            raise ValueError(f"creases must be a jaxrod.Creases or None, got {type(creases).__name__}")
+        if creases is not None and is_concrete_pair(creases.positions, length):
+            L = float(length)
+            if np.any(np.asarray(creases.positions) >= L):
+                raise ValueError(f"crease positions must lie in (0, L) = (0, {L:g}), got "
+                                 f"{np.asarray(creases.positions).tolist()}")
+            if is_concrete_pair(psi0, s0, creases.angles, creases.widths) and float(psi0) < math.pi:
+                _check_overlaps(np.append(np.asarray(creases.positions, float), 0.5 * L),
+                                np.append(np.asarray(creases.angles, float), float(psi0)),
+                                np.append(np.asarray(creases.widths, float), float(s0)))
         self.psi0 = _leaf(psi0)
         self.s0 = _leaf(s0)
         self.length = _leaf(length)
         self.bending_stiffness = _leaf(bending_stiffness)
         self.line_density = _leaf(line_density)
+        self.creases = creases
+        self.centred = creases is None or not (is_concrete_pair(psi0) and float(psi0) == math.pi)
 
     @classmethod
     def from_physical(cls, *, youngs_modulus, density, thickness, width, length, psi0=math.pi, s0=None):
@@ -86,8 +214,35 @@ class Strip(eqx.Module):
         return self.length / self.speed_gauge
 
     def natural_angle(self, s):
-        r"""$\theta_0(s) = \frac{\Psi_0-\pi}{2}\tanh\frac{s-L/2}{s_0}$."""
-        return 0.5 * (self.psi0 - jnp.pi) * jnp.tanh((s - 0.5 * self.length) / self.s0)
+        r"""$\theta_0(s)$: the centred crease's $\frac{\Psi_0-\pi}{2}\tanh\frac{s-L/2}{s_0}$,
+        plus the profiles of `creases` when there are any."""
+        th = _crease_profile(s, 0.5 * self.length, self.psi0, self.s0)
+        if self.creases is not None:
+            th = th + self.creases.natural_angle(s)
+        return th
+
+    def crease_list(self):
+        """Every crease as `(position, angle, width)` arrays of shape (m,): the centred one
+        first (`centred`: unless the strip was built with `psi0` = pi and further `creases`),
+        then `creases`. The flat strip lists its centred "crease" of angle pi, whose height
+        is the midpoint's. The count is fixed by the strip's structure, so it is the same
+        under `jit` as outside."""
+        parts = []
+        if self.centred:
+            parts.append((jnp.atleast_1d(0.5 * self.length), jnp.atleast_1d(self.psi0), jnp.atleast_1d(self.s0)))
+        if self.creases is not None:
+            c = self.creases
+            parts.append((c.positions, c.angles, c.widths))
+        dtype = jnp.result_type(*(x for p in parts for x in p))
+        return tuple(jnp.concatenate([jnp.asarray(p[i], dtype) for p in parts]) for i in range(3))
+
+    def unfolded(self, u):
+        r"""The strip with every fold deficit $\pi-\Psi$ scaled by `u` (0: flat, 1: itself);
+        the homotopy that builds initial states walks `u` from 0 to 1."""
+        st = eqx.tree_at(lambda s: s.psi0, self, jnp.pi + u * (self.psi0 - jnp.pi))
+        if self.creases is not None:
+            st = eqx.tree_at(lambda s: s.creases.angles, st, jnp.pi + u * (self.creases.angles - jnp.pi))
+        return st
 
 
 class Clamps(eqx.Module):
@@ -113,11 +268,15 @@ class Clamps(eqx.Module):
         return cls(gap, alpha, alpha)
 
 
-def _graded_fractions(n: int, ratio: float, width: float) -> np.ndarray:
-    """Node fractions in [0, 1] with density 1 + (ratio-1) sech^2((x-1/2)/width)."""
+def _graded_fractions(n: int, ratio: float, width: float, centres=(0.5,)) -> np.ndarray:
+    """Node fractions in [0, 1] with density 1 + (ratio-1) sech^2((x-1/2)/width), or with
+    several `centres` (fractions of L) 1 + (ratio-1) max_k sech^2((x-c_k)/width), each half
+    [0, 1/2], [1/2, 1] graded on its own with n/2 segments (a node stays at L/2)."""
     xi = np.linspace(0.0, 1.0, n + 1)
     if ratio == 1.0:
         return xi
+    if tuple(centres) != (0.5,):
+        return _graded_halves(n, ratio, width, np.asarray(centres, float))
     a = ratio - 1.0
 
     def cdf(x):
@@ -134,6 +293,22 @@ def _graded_fractions(n: int, ratio: float, width: float) -> np.ndarray:
     return x
 
 
+def _graded_halves(n, ratio, width, centres):
+    """`_graded_fractions` for several centres: the density integrated by the trapezoid rule
+    on a fine grid, each half inverted on its own (n/2 segments each)."""
+    a = ratio - 1.0
+    out = []
+    for lo, hi in ((0.0, 0.5), (0.5, 1.0)):
+        x = np.linspace(lo, hi, 20001)
+        dens = 1.0 + a * np.max(1.0 / np.cosh((x[:, None] - centres[None, :]) / width) ** 2, axis=1)
+        cdf = np.concatenate([[0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(x))])
+        target = np.linspace(0.0, cdf[-1], n // 2 + 1)
+        out.append(np.interp(target, cdf, x))
+    x = np.concatenate([out[0], out[1][1:]])
+    x[0], x[-1], x[n // 2] = 0.0, 1.0, 0.5
+    return x
+
+
 class Mesh(eqx.Module):
     r"""Discretization: `n` segments (even, so a node sits at the crease $s=L/2$).
 
@@ -141,14 +316,22 @@ class Mesh(eqx.Module):
     from it (density $1+(r-1)\,\mathrm{sech}^2((s/L-1/2)/w)$, $w$ = `width`), so a sharp
     crease does not force a fine mesh everywhere. The mesh is fixed in units of $L$ and
     does not move with $s_0$, so derivatives with respect to $s_0$ are at fixed mesh.
+
+    `centres` (fractions of L, default `(0.5,)`): where to refine, one entry per crease for a
+    strip with several (`Mesh.for_strip` takes them from the strip); the density is then
+    $1+(r-1)\max_k\mathrm{sech}^2((s/L-c_k)/w)$ and each half of the strip is graded on its
+    own, so a node stays at $L/2$ and a mirror-symmetric set of centres gives a
+    mirror-symmetric mesh. The mesh, and so derivatives with respect to crease positions,
+    stays fixed when the creases move.
     """
 
     n: int = eqx.field(static=True)
     refine: float = eqx.field(static=True)
     width: float = eqx.field(static=True)
+    centres: tuple = eqx.field(static=True, default=(0.5,))
     fractions: tuple = eqx.field(static=True, repr=False)
 
-    def __init__(self, n: int = 100, refine: float = 1.0, width: float = 0.1):
+    def __init__(self, n: int = 100, refine: float = 1.0, width: float = 0.1, centres=(0.5,)):
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
             raise ValueError(f"n (number of segments) must be an integer, got {n!r}")
         if n < 8 or n % 2:
@@ -157,17 +340,36 @@ class Mesh(eqx.Module):
             raise ValueError(f"refine must be a finite ratio >= 1, got {refine!r}")
         if not (math.isfinite(width) and 0.0 < width <= 1.0):
             raise ValueError(f"width must lie in (0, 1], got {width!r}")
+        try:
+            centres = tuple(sorted(float(c) for c in np.atleast_1d(np.asarray(centres, float))))
+        except (TypeError, ValueError):
+            raise ValueError(f"centres must be fractions of L in (0, 1), got {centres!r}") from None
+        if not centres or not all(math.isfinite(c) and 0.0 < c < 1.0 for c in centres):
+            raise ValueError(f"centres must be fractions of L in (0, 1), got {centres!r}")
         self.n = int(n)
         self.refine = float(refine)
         self.width = float(width)
-        self.fractions = tuple(float(x) for x in _graded_fractions(self.n, self.refine, self.width))
+        self.centres = centres if self.refine != 1.0 else (0.5,)  # a uniform mesh has no centres
+        self.fractions = tuple(float(x) for x in _graded_fractions(self.n, self.refine, self.width, centres))
+
+    @classmethod
+    def for_strip(cls, strip, n: int = 100, refine: float = 1.0, width: float = 0.1):
+        """A mesh refined around every crease of `strip` (concrete positions)."""
+        pos, _, _ = strip.crease_list()
+        return cls(n, refine, width, tuple(np.asarray(pos, float) / float(strip.length)))
+
+    def spacing_at(self, x):
+        """The segment length (fraction of L) of the segment holding fraction `x`."""
+        f = np.asarray(self.fractions)
+        i = int(np.clip(np.searchsorted(f, x) - 1, 0, self.n - 1))
+        return float(f[i + 1] - f[i])
 
     def __hash__(self):
-        return hash((self.n, self.refine, self.width))
+        return hash((self.n, self.refine, self.width, self.centres))
 
     def __eq__(self, other):
-        return (isinstance(other, Mesh) and (self.n, self.refine, self.width)
-                == (other.n, other.refine, other.width))
+        return (isinstance(other, Mesh) and (self.n, self.refine, self.width, self.centres)
+                == (other.n, other.refine, other.width, other.centres))
 
 
 class Stretching(eqx.Module):
@@ -285,6 +487,31 @@ class Scene(eqx.Module):
             g, L = np.asarray(clamps.gap, float), np.asarray(strip.length, float)
             if np.any(g >= L):
                 raise ValueError(f"gap must lie in (0, L) = (0, {float(np.max(L)):g}), got {clamps.gap!r}")
+        if strip.creases is not None:
+            _warn_unresolved(strip, self.mesh)
+
+
+def _warn_unresolved(strip, mesh):
+    """Warn when a segment at a crease is longer than the crease's width 2 s0_k."""
+    import warnings
+
+    if not is_concrete_pair(strip.length, strip.creases.positions, strip.creases.widths):
+        return
+    L = float(strip.length)
+    pos, _, wid = (np.asarray(v, float) for v in strip.crease_list())
+    for c, w in zip(pos, wid):
+        h = mesh.spacing_at(c / L) * L
+        if h > 2.0 * w:
+            hint = "raise n"
+            for r in (1.5, 2, 3, 4, 6, 8, 12, 16):
+                fine = Mesh(mesh.n, r, mesh.width, tuple(pos / L))
+                if all(fine.spacing_at(q / L) * L <= 2.0 * v for q, v in zip(pos, wid)):
+                    hint = f"refine the mesh around the creases, e.g. Mesh.for_strip(strip, n={mesh.n}, refine={r:g}) " \
+                           f"(--refine {r:g}), or raise n"
+                    break
+            warnings.warn(f"the crease at s = {c:g} is narrower (2 s0 = {2 * w:g}) than its segment ({h:g}): "
+                          f"{hint}", stacklevel=2)
+            return
 
 
 def is_concrete_pair(*xs) -> bool:
@@ -293,12 +520,36 @@ def is_concrete_pair(*xs) -> bool:
     return all(is_concrete(x) for x in xs)
 
 
+def parse_creases(creases, length=1.0, s0=0.02):
+    """A `Creases` from a `Creases` (returned as is) or a sequence of `(position, psi0_deg)` or
+    `(position, psi0_deg, s0)` tuples in units of L and degrees (`s0` defaults to `s0`)."""
+    if creases is None or isinstance(creases, Creases):
+        return creases
+    rows = []
+    for k, c in enumerate(creases):
+        try:
+            row = tuple(float(v) for v in c)
+        except (TypeError, ValueError):
+            raise ValueError(f"creases[{k}] must be (position, psi0_deg) or (position, psi0_deg, s0), "
+                             f"got {c!r}") from None
+        if len(row) not in (2, 3):
+            raise ValueError(f"creases[{k}] must be (position, psi0_deg) or (position, psi0_deg, s0), got {c!r}")
+        rows.append(row if len(row) == 3 else row + (s0,))
+    if not rows:
+        raise ValueError("creases must hold at least one (position, psi0_deg[, s0]) entry")
+    pos, ang, wid = (np.array([r[i] for r in rows]) for i in range(3))
+    return Creases.from_degrees(pos * length, ang, wid * length, length=length)
+
+
 def make_scene(psi0_deg=60.0, gap=0.5, alpha_deg=0.0, *, alpha_right_deg=None, s0=0.02, n=100,
-               refine=1.0, stretching=None, gravity=None, contact=None) -> Scene:
+               refine=1.0, stretching=None, gravity=None, contact=None, creases=None) -> Scene:
     """Convenience constructor in nondimensional units with angles in degrees.
 
     `alpha_deg` rotates the left clamp, and the right clamp too unless
-    `alpha_right_deg` is given (asymmetric actuation).
+    `alpha_right_deg` is given (asymmetric actuation). `creases`: further creases, a
+    [`jaxrod.Creases`][] or `[(position, psi0_deg[, s0]), ...]` (units of L, degrees); with
+    them `psi0_deg` is the centred crease's angle (give 180 for none) and the mesh is refined
+    (`refine`) around every crease.
     """
     check_param("psi0", psi0_deg, lo=0.0, hi=180.0, hi_open=False, unit=" deg")
     check_param("gap", gap, lo=0.0, hi=1.0)
@@ -306,10 +557,11 @@ def make_scene(psi0_deg=60.0, gap=0.5, alpha_deg=0.0, *, alpha_right_deg=None, s
     check_param("alpha", alpha_deg)
     d = jnp.pi / 180.0
     a_r = alpha_deg if alpha_right_deg is None else alpha_right_deg
+    strip = Strip(psi0=psi0_deg * d, s0=s0, creases=parse_creases(creases, 1.0, s0))
     return Scene(
-        Strip(psi0=psi0_deg * d, s0=s0),
+        strip,
         Clamps(gap, alpha_deg * d, a_r * d),
-        Mesh(n, refine),
+        Mesh(n, refine) if creases is None else Mesh.for_strip(strip, n, refine),
         stretching=stretching,
         gravity=gravity,
         contact=contact,

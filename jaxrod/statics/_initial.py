@@ -77,8 +77,7 @@ def _path_params(kind, u):
 
 def _deformed(scene, uc, ua):
     st, cl = scene.strip, scene.clamps
-    psi0 = jnp.pi + uc * (st.psi0 - jnp.pi)
-    scene = eqx.tree_at(lambda s: s.strip.psi0, scene, psi0)
+    scene = eqx.tree_at(lambda s: s.strip, scene, st.unfolded(uc))
     scene = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene,
                         (ua * cl.alpha_left, ua * cl.alpha_right))
     if scene.gravity is not None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from ..energy.bending import curvature as _curvature
-from ..energy.geometry import discretize
+from ..energy.geometry import at_arclength, discretize
 from ..energy.lagrangian import energies as _energies
 from ..energy.lagrangian import positions as _positions
 from ..energy.lagrangian import strains as _strains
@@ -38,6 +38,13 @@ def strains(eq):
 def fold_height(eq):
     """$y(L/2)$, the height of the crease node. Up state > 0, down state < 0."""
     return node_positions(eq)[eq.scene.mesh.n // 2, 1]
+
+
+def crease_heights(eq):
+    """Height $y(c_k)$ of every crease (`Strip.crease_list` order: the centred crease first,
+    then `Strip.creases`), shape (m,); positions interpolated linearly between nodes."""
+    pos, _, _ = eq.scene.strip.crease_list()
+    return at_arclength(node_positions(eq), discretize(eq.scene).s, pos.astype(eq.theta.dtype))[:, 1]
 
 
 def energies(eq):
