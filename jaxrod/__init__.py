@@ -116,6 +116,8 @@ from .dynamics import simulate as simulate
 from .dynamics import snap_dynamics as snap_dynamics
 from .dynamics import fit_speed_plane as fit_speed_plane
 from .dynamics import snap_speed as snap_speed
+from .dynamics import snap_speed_run as snap_speed_run
+from .dynamics import SpeedRun as SpeedRun
 from .dynamics import speed_plane as speed_plane
 from .dynamics import Start as Start
 from .dynamics import Trajectory as Trajectory

@@ -259,3 +259,15 @@ def test_cli_bad_crease_exits_2(value, capsys):
     assert main(["equilibrium", "--n", str(N), "--crease", value]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "crease" in err[0]
+
+
+def test_snap_of_a_symmetric_pair_moves_both_creases_alike():
+    """A symmetric fold of a mirror-symmetric set (up, creases at 0.25 L and 0.75 L): the
+    snap keeps the mirror symmetry, so both creases reach the same peak speed; the run is
+    clean and each crease's speed is reported beside the fold's at L/2."""
+    r = jr.snap_speed_run(pair(0.25, 0.75), direction="up")
+    assert r.result == jr.RESULTS.successful and jr.KIND_NAMES[int(r.kind)] == "fold"
+    v = np.asarray(r.v_s_creases)
+    assert v.shape == (2,) and np.all(np.isfinite(v)) and v[0] > 1.0
+    assert v[0] == pytest.approx(v[1], rel=1e-6)
+    assert float(r.v_s) > 0

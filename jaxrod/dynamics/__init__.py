@@ -33,6 +33,8 @@ from ._scenes import Start as Start
 from ._simulate import simulate as simulate
 from ._simulate import Trajectory as Trajectory
 from ._snap_speed import snap_speed as snap_speed
+from ._snap_speed import snap_speed_run as snap_speed_run
+from ._snap_speed import SpeedRun as SpeedRun
 from ._speed_plane import fit_speed_plane as fit_speed_plane
 from ._speed_plane import speed_plane as speed_plane
 from ._simulate import SOLVERS as SOLVERS
