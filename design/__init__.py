@@ -4,7 +4,9 @@ Objectives (`AlphaUp`, `AlphaDown`, `Hysteresis`, `FoldHeight`, `BendingEnergy`,
 `SnapSpeed`), a feasible parametrization (`Parametrization`), multi-start optimization
 (`optimize`, Levenberg-Marquardt or optax), results that save and reload
 (`DesignResult.save` / `.load`), differentiable critical angles (`critical_angles`) and the
-design studies (`snap_angle_study`, ...). float64 must be enabled by the caller.
+design studies (`snap_angle_study`, ...), crease positions and angles as design variables
+(`CreaseParametrization`, `two_crease_study`, `crease_position_study`). float64 must be
+enabled by the caller.
 """
 
 from ._actuator import actuator_study as actuator_study
@@ -45,3 +47,11 @@ from ._programs import fig4_study as fig4_study
 from ._programs import ProgramDesign as ProgramDesign
 from ._programs import sequence_program as sequence_program
 from ._programs import two_knot_program as two_knot_program
+from ._creases import check_creases as check_creases
+from ._creases import crease_position_study as crease_position_study
+from ._creases import crease_scene as crease_scene
+from ._creases import CreaseCheck as CreaseCheck
+from ._creases import CreaseParametrization as CreaseParametrization
+from ._creases import PositionResult as PositionResult
+from ._creases import two_crease_study as two_crease_study
+from ._creases import TwoCreaseResult as TwoCreaseResult

@@ -143,14 +143,25 @@ def test_failed_refinement_says_no_derivative():
 
 
 def test_extrapolated_paths_carry_both_meshes_codes():
-    """A continuation cut short on both meshes is not a clean 'does not snap'. (Both meshes
-    successful give a successful combination: test_extrapolate.py's CLI test.)"""
-    sc = jr.make_scene(psi0_deg=60, gap=0.5, n=N // 2)
-    x = jr.snap_angles_extrapolated(sc, settings=jr.Continuation(max_points=3), polish=False)
-    for e in (x.up, x.down):
-        assert e.result == jr.RESULTS.continuation_incomplete
-        assert e.result_coarse == jr.RESULTS.continuation_incomplete
-        assert e.result_fine == jr.RESULTS.continuation_incomplete
+    """A continuation cut short on either mesh is not a clean 'does not snap': the combined
+    path takes the code of the mesh that failed (the fine mesh's where both did), and keeps
+    both meshes' own codes. (The combination of two runs by `snap_angles_extrapolated` is
+    checked end to end in test_extrapolate.py; the cut-short path here is test_snap.py's
+    compiled program, N = 40 with a 3-point buffer.)"""
+    from jaxrod.branches._extrapolate import _combine
+
+    cut = jr.snap_angles(jr.make_scene(60.0, 0.5, 0.0, n=40), settings=jr.Continuation(max_points=3), polish=False)
+    good = _snap(60.0, 0.5)
+    incomplete = jr.RESULTS.continuation_incomplete
+    for name in ("up", "down"):
+        c, g = getattr(cut, name), getattr(good, name)
+        assert c.result == incomplete and g.result == OK and bool(g.snaps) and not bool(c.snaps)
+        for coarse, fine in ((c, c), (g, c), (c, g)):
+            e = _combine(coarse, fine)
+            assert e.result == incomplete
+            assert e.result_coarse == coarse.result and e.result_fine == fine.result
+        e = _combine(g, g)
+        assert e.result == OK and bool(e.consistent)
 
 
 @pytest.mark.parametrize("leaf", ["psi0", "gap"])

@@ -354,9 +354,17 @@ class Mesh(eqx.Module):
 
     @classmethod
     def for_strip(cls, strip, n: int = 100, refine: float = 1.0, width: float = 0.1):
-        """A mesh refined around every crease of `strip` (concrete positions)."""
-        pos, _, _ = strip.crease_list()
-        return cls(n, refine, width, tuple(np.asarray(pos, float) / float(strip.length)))
+        """A mesh refined around every crease of `strip` (concrete positions; a uniform mesh,
+        `refine` = 1, needs none)."""
+        if refine == 1.0:
+            return cls(n, refine, width)
+        leaves = [strip.length] + ([] if strip.creases is None else [strip.creases.positions])
+        if not is_concrete_pair(*leaves):
+            raise ValueError("Mesh.for_strip: the crease positions must be concrete (not traced) to refine around them")
+        L = float(strip.length)
+        pos = ([0.5 * L] if strip.centred else []) + (
+            [] if strip.creases is None else np.asarray(strip.creases.positions, float).tolist())
+        return cls(n, refine, width, tuple(np.asarray(pos) / L))
 
     def spacing_at(self, x):
         """The segment length (fraction of L) of the segment holding fraction `x`."""
@@ -498,7 +506,11 @@ def _warn_unresolved(strip, mesh):
     if not is_concrete_pair(strip.length, strip.creases.positions, strip.creases.widths):
         return
     L = float(strip.length)
-    pos, _, wid = (np.asarray(v, float) for v in strip.crease_list())
+    cr = strip.creases
+    pos = np.asarray(cr.positions, float)
+    wid = np.asarray(cr.widths, float)
+    if strip.centred and is_concrete_pair(strip.s0):
+        pos, wid = np.append(pos, 0.5 * L), np.append(wid, float(strip.s0))
     for c, w in zip(pos, wid):
         h = mesh.spacing_at(c / L) * L
         if h > 2.0 * w:

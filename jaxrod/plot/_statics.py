@@ -61,7 +61,8 @@ def _draw_clamp(ax, origin, direction, L, zorder=3):
 def plot_shape(eq, ax=None, label=None, color=None, show_clamps=True):
     r"""Draw the shape of equilibrium `eq` on `ax` (a new figure if `None`).
 
-    Draws the strip through its node positions, marks the fold node ($s=L/2$) and, with
+    Draws the strip through its node positions, marks the fold node ($s=L/2$) (with several
+    creases: every crease, and the midpoint smaller) and, with
     `show_clamps`, the two clamps as hatched blocks along the clamp tangents
     ($+\alpha_L$ at $(0,0)$, $-\alpha_R$ at $(G,0)$). Axes are in units of $L$ with equal
     aspect. **Returns:** the axes.
@@ -75,8 +76,17 @@ def plot_shape(eq, ax=None, label=None, color=None, show_clamps=True):
     mid = eq.scene.mesh.n // 2
     (line,) = ax.plot(xy[:, 0], xy[:, 1], "-", color=color, linewidth=2.2, label=label, zorder=4)
     c = line.get_color()
-    ax.plot(xy[mid, 0], xy[mid, 1], "o", markersize=8, markerfacecolor=c, markeredgecolor="k",
-            markeredgewidth=1.0, zorder=5)
+    if eq.scene.strip.creases is None:
+        ax.plot(xy[mid, 0], xy[mid, 1], "o", markersize=8, markerfacecolor=c, markeredgecolor="k",
+                markeredgewidth=1.0, zorder=5)
+    else:  # every crease at its own arclength (the midpoint stays marked, smaller)
+        from ..energy.geometry import at_arclength, discretize
+
+        pos = np.asarray(eq.scene.strip.crease_list()[0], float)
+        pts = np.asarray(at_arclength(node_positions(eq), discretize(eq.scene).s, pos), float) / L
+        ax.plot(pts[:, 0], pts[:, 1], "o", markersize=8, markerfacecolor=c, markeredgecolor="k",
+                markeredgewidth=1.0, zorder=5)
+        ax.plot(xy[mid, 0], xy[mid, 1], "o", markersize=3, color="k", zorder=5)
     if show_clamps:
         _, left, right = _clamp_geometry(eq)
         for origin, direction in (left, right):
@@ -94,6 +104,11 @@ def _scene_title(eq):
     aR = math.degrees(float(sc.clamps.alpha_right))
     G = float(sc.clamps.gap) / float(sc.strip.length)
     alpha = f"α = {aL:g}°" if aL == aR else f"α_L = {aL:g}°, α_R = {aR:g}°"
+    if sc.strip.creases is not None:
+        L = float(sc.strip.length)
+        pos, ang, _ = (np.asarray(v, float) for v in sc.strip.crease_list())
+        folds = ", ".join(f"{math.degrees(a):g}° at {c / L:g}" for c, a in zip(pos, ang))
+        return f"creases {folds}; G/L = {G:g}, {alpha}"
     return f"Ψ0 = {psi0:g}°, G/L = {G:g}, {alpha}, s0/L = {float(sc.strip.s0) / float(sc.strip.length):g}"
 
 
@@ -130,9 +145,16 @@ def plot_equilibria(eqs, labels, path, title=None):
         plot_shape(eq, ax=ax, label=text, color=colors[i % len(colors)], show_clamps=key not in drawn)
         drawn.add(key)
     handles, _ = ax.get_legend_handles_labels()
+    creased = any(eq.scene.strip.creases is not None for eq in eqs)
     handles.append(Line2D([], [], linestyle="none", marker="o", markerfacecolor="white", markeredgecolor="k",
-                          markersize=8, label="fold (s = L/2)"))
-    ax.legend(handles=handles, loc="best", fontsize=9, framealpha=0.9)
+                          markersize=8, label="creases" if creased else "fold (s = L/2)"))
+    if creased:
+        handles.append(Line2D([], [], linestyle="none", marker="o", color="k", markersize=3, label="s = L/2"))
+        # below the axes: several creases' shapes fill the plot
+        ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.13), fontsize=8, framealpha=0.9)
+        fig.set_size_inches(7.0, 6.4)
+    else:
+        ax.legend(handles=handles, loc="best", fontsize=9, framealpha=0.9)
     if eqs:
         ax.set_title(title if title is not None else _scene_title(eqs[0]), fontsize=10)
     ax.grid(True, linewidth=0.3, alpha=0.5)
