@@ -65,8 +65,17 @@ def main():
     args = ap.parse_args()
     ns = [24, 48, 96] if args.quick else [24, 48, 96, 192]
     t_start = time.time()
-    rows = {}
+    suffix = "_quick" if args.quick else ""
+    out = os.path.join(HERE, "results", f"creases{suffix}")
+    rows, spent = {}, 0.0
+    if os.path.exists(out + ".json"):  # resume: sets finished on the same meshes are kept
+        with open(out + ".json") as fh:
+            old = json.load(fh)
+        if old["meta"]["meshes"] == ns:
+            rows, spent = old["sets"], old["meta"]["seconds"]
     for label, cr in SETS.items():
+        if label in rows:
+            continue
         rec = {"creases": cr, "uniform": {}, "graded": {}}
         for n in ns:
             rec["uniform"][n] = angles(scene(cr, n))
@@ -98,16 +107,17 @@ def main():
             rec[f"v_s_{name}"] = float(r.v_s) if np.isfinite(float(r.v_s)) else None
             rec[f"v_s_creases_{name}"] = [float(v) if np.isfinite(float(v)) else None for v in np.asarray(r.v_s_creases)]
             rec[f"speed_result_{name}"] = jr.result_name(r.result)
-        rows[label] = rec
+        rows[label] = json.loads(json.dumps(rec, default=str))  # mesh keys as strings, as when read back
         print(label, {k: v for k, v in rec.items() if k.startswith(("reference", "order", "v_s"))}, flush=True)
-    meta = dict(date=datetime.date.today().isoformat(), machine=platform.platform(), cpus=os.cpu_count(),
-                jax=jax.__version__, seconds=time.time() - t_start, gap=0.5, s0=0.02, meshes=ns)
-    suffix = "_quick" if args.quick else ""
-    out = os.path.join(HERE, "results", f"creases{suffix}")
-    with open(out + ".json", "w") as fh:
-        json.dump(dict(meta=meta, sets=rows), fh, indent=1, default=str)
-    with open(out + ".md", "w") as fh:
-        fh.write(_markdown(meta, rows, ns))
+        meta = dict(date=datetime.date.today().isoformat(), machine=platform.platform(), cpus=os.cpu_count(),
+                    jax=jax.__version__, seconds=spent + time.time() - t_start, gap=0.5, s0=0.02, meshes=ns)
+        with open(out + ".json", "w") as fh:
+            json.dump(dict(meta=meta, sets=rows), fh, indent=1, default=str)
+        with open(out + ".md", "w") as fh:
+            fh.write(_markdown(meta, rows, ns))
+        # every (crease count, mesh) is its own compiled program: release them between sets,
+        # or one process runs out of memory mappings (see tests/conftest.py)
+        jax.clear_caches()
     print("wrote", out + ".json", out + ".md")
 
 
@@ -129,7 +139,7 @@ def _markdown(meta, rows, ns):
             cells = []
             for name in ("up", "down"):
                 for fam in ("uniform", "graded"):
-                    r = rec[fam][n][name]
+                    r = rec[fam][str(n)][name]
                     tag = r["kind"] if r["result"] == "successful" else f"{r['kind']}, {r['result']}"
                     cells.append(f"{_fmt(r['alpha_c_deg'])} ({tag})")
             lines.append(f"| {n} | " + " | ".join(cells) + " |")
@@ -141,7 +151,7 @@ def _markdown(meta, rows, ns):
             ou, og = rec.get(f"order_uniform_{name}"), rec.get(f"order_graded_{name}")
             eu = rec[f"error_uniform_{name}"]
             lines.append(f"\n{name}: reference {ref:+.4f} deg; observed order uniform {_fmt(ou, '.2f')}, graded "
-                         f"{_fmt(og, '.2f')}; uniform error at N = 96: {_fmt(eu.get(96), '.2e')} deg.")
+                         f"{_fmt(og, '.2f')}; uniform error at N = 96: {_fmt(eu.get('96'), '.2e')} deg.")
         lines.append("")
         for name in ("up", "down"):
             vc = ", ".join(_fmt(v, ".2f") for v in rec[f"v_s_creases_{name}"])

@@ -271,3 +271,41 @@ def test_snap_of_a_symmetric_pair_moves_both_creases_alike():
     assert v.shape == (2,) and np.all(np.isfinite(v)) and v[0] > 1.0
     assert v[0] == pytest.approx(v[1], rel=1e-6)
     assert float(r.v_s) > 0
+
+
+@pytest.mark.parametrize("value, match", [("0.3,1.2", "crease 1 position"), ("0.5,0.51", "overlap"),
+                                          ("x", "creases-at")])
+def test_cli_phase_diagram_bad_layout_exits_2(value, match, tmp_path, capsys):
+    from jaxrod.cli import main
+
+    assert main(["phase-diagram", "--psi0", "60,90", "--gaps", "0.5", "--n", str(N), "--creases-at", value,
+                 "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and match in err[0]
+
+
+def test_phase_diagram_layout_validated():
+    with pytest.raises(ValueError, match="crease 0 position"):
+        jr.phase_diagram([90.0], [0.5], n=N, creases=[0.0, 0.5], progress=False)
+    with pytest.raises(ValueError, match="creases"):
+        jr.phase_diagram([90.0], [0.5], n=N, creases=[], progress=False)
+
+
+@pytest.mark.slow
+def test_phase_diagram_of_a_crease_layout_equals_snap_angles(tmp_path):
+    """A phase diagram over (Psi0, G/L) for creases at 0.3 L and 0.7 L, each of fold angle
+    Psi0: the same angles and kinds as `snap_angles` on each scene (to the bisection's 1e-6
+    deg: the diagram skips the extended-system polish), and a resumed run reads every chunk."""
+    psis, gaps = [90.0, 120.0], [0.5, 0.7]
+    ds = jr.phase_diagram(psis, gaps, n=N, creases=[0.3, 0.7], out=str(tmp_path), progress=False)
+    assert ds.attrs["crease_positions"] == "0.3,0.7"
+    for i, p in enumerate(psis):
+        for j, g in enumerate(gaps):
+            r = jr.snap_angles(jr.make_scene(180.0, g, n=N, creases=[(0.3, p), (0.7, p)]))
+            for name in ("up", "down"):
+                q = getattr(r, name)
+                assert float(ds[f"alpha_c_{name}"].values[i, j]) == pytest.approx(math.degrees(float(q.alpha_c)),
+                                                                                 abs=1e-6)
+                assert int(ds[f"kind_{name}"].values[i, j]) == int(q.kind)
+    again = jr.phase_diagram(psis, gaps, n=N, creases=[0.3, 0.7], out=str(tmp_path), progress=False)
+    assert again.attrs["computed_chunks"] == []

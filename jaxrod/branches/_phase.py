@@ -61,7 +61,7 @@ from ._continuation import Continuation, SymmetricAlpha
 from ..statics import float_scene, solve_equilibrium
 from ..statics import initial_state_signed, still_tracked
 from .._misc import check_grid, package_version, run_if as _run_if, run_if_each
-from ..model import Clamps, Contact, Mesh, Scene, Strip
+from ..model import Clamps, Contact, Creases, Mesh, Scene, Strip
 from ._snap import _snap_angles_from
 from ..results import RESULTS
 from ..sweeps import agree, MODES, ShardedMap
@@ -110,21 +110,33 @@ def _contact_key(contact):
     return (float(contact.thickness), float(contact.stiffness), float(contact.exclusion))
 
 
-def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), contact=None):
+def _strip(psi0, s0, layout):
+    """The strip of a grid point: the centred crease of fold angle `psi0` (rad), or with a
+    `layout` (crease positions, fractions of L) one crease of that angle at each."""
+    if not layout:
+        return Strip(psi0=psi0, s0=s0)
+    m = len(layout)
+    cr = Creases(np.asarray(layout, float), jnp.full((m,), psi0), jnp.full((m,), s0))
+    return Strip(psi0=math.pi, s0=s0, creases=cr)
+
+
+def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), contact=None, layout=()):
     """All gaps at one fold angle (rad), one gap after the other (`lax.scan`): the start
     states of each gap by Newton from the previous gap's (homotopy where that fails), then
     `snap_angles` from them without the extended-system polish (bisection values) and
     without following the landed branch. `keep_branch` (static) also returns each path's
     walked branch (`branch_up`, `branch_down`: the first continuation stage, a `Branch`
     per gap) for the tests that check the walks themselves. `contact`: a
-    `(thickness, stiffness, exclusion)` key of the scenes' `jaxrod.Contact`, or None."""
+    `(thickness, stiffness, exclusion)` key of the scenes' `jaxrod.Contact`, or None;
+    `layout`: crease positions (fractions of L, static) each folded by `psi0`, or () for the
+    centred crease."""
     par = SymmetricAlpha()
     dtype = psi0.dtype
     N = mesh.n
 
     def one(carry, g):
         t_prev, m_prev, ok_prev = carry
-        scene = par.set(float_scene(Scene(Strip(psi0=psi0, s0=s0), Clamps(g), mesh, contact=_contact(contact))), 0.0)
+        scene = par.set(float_scene(Scene(_strip(psi0, s0, layout), Clamps(g), mesh, contact=_contact(contact))), 0.0)
         # both start states through one traced body (`lax.map` over the side): one compiled
         # copy of the warm Newton and of the homotopy instead of two (XLA compile at -O0 25 s -> 20 s)
         is_sds = lambda x: isinstance(x, jax.ShapeDtypeStruct)  # noqa: E731
@@ -156,9 +168,9 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), con
 
 
 @eqx.filter_jit
-def _grid(psis, gaps, s0, mesh, settings=Continuation(), contact=None):
+def _grid(psis, gaps, s0, mesh, settings=Continuation(), contact=None, layout=()):
     """All chunks in one call: `vmap` over the fold angles (rad) of `_chunk`."""
-    return jax.vmap(lambda p: _chunk(p, gaps, s0, mesh, settings=settings, contact=contact))(psis)
+    return jax.vmap(lambda p: _chunk(p, gaps, s0, mesh, settings=settings, contact=contact, layout=layout))(psis)
 
 
 def _resolve_batch(batch):
@@ -172,19 +184,22 @@ def _resolve_batch(batch):
 
 
 @functools.lru_cache(maxsize=8)
-def _sharded(mesh, settings, devices, per_device, mode, contact=None):
+def _sharded(mesh, settings, devices, per_device, mode, contact=None, layout=()):
     """One `ShardedMap` of `_chunk` per mesh and split (so repeated calls reuse its compilation)."""
     return ShardedMap(lambda psi0, shared: _chunk(psi0, shared[0], shared[1], mesh, settings=settings,
-                                                  contact=contact),
+                                                  contact=contact, layout=layout),
                       devices=devices, per_device=per_device, mode=mode)
 
 
-def _attrs(gaps, s0, n, refine, contact=None):
+def _attrs(gaps, s0, n, refine, contact=None, layout=()):
     # `chunk_variables` (not `variables`: scipy's netcdf_file has an attribute of that name):
     # a chunk written by a version with other variables is recomputed
-    return {"gaps_hash": ",".join(f"{g:.12g}" for g in gaps), "s0": float(s0), "n": int(n),
-            "refine": float(refine), "chunk_variables": ",".join(VARIABLES),
-            "contact": "none" if contact is None else "thickness {:.12g} stiffness {:.12g} exclusion {:.12g}".format(*contact)}
+    a = {"gaps_hash": ",".join(f"{g:.12g}" for g in gaps), "s0": float(s0), "n": int(n),
+         "refine": float(refine), "chunk_variables": ",".join(VARIABLES),
+         "contact": "none" if contact is None else "thickness {:.12g} stiffness {:.12g} exclusion {:.12g}".format(*contact)}
+    if layout:
+        a["crease_positions"] = ",".join(f"{c:.12g}" for c in layout)
+    return a
 
 
 def _chunk_dataset(psi0_deg, gaps, values, attrs):
@@ -237,12 +252,15 @@ def _write(ds, path):
 
 
 def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progress=True, on_chunk=None,
-                  batch="auto", devices=None, per_device=1, split="shard_map", contact=None):
+                  batch="auto", devices=None, per_device=1, split="shard_map", contact=None, creases=None):
     r"""Critical clamp angles over the grid `psi0_deg` x `gaps` (an `xarray.Dataset`).
 
     **Arguments:** `psi0_deg` fold angles in (0, 180] (degrees), `gaps` values of $G/L$ in
     (0, 1), `s0`, `n`, `refine`, `contact` (a [`jaxrod.Contact`][]: self-contact modelled)
-    as in [`jaxrod.make_scene`][]; `out` a directory for the
+    as in [`jaxrod.make_scene`][]; `creases`: crease positions (fractions of L) for a strip
+    with a crease at each, all of fold angle $\Psi_0$ and width `s0` (the mesh refined around
+    them with `refine`; attribute `crease_positions`), instead of the one centred crease;
+    `out` a directory for the
     resumable chunk files and `phase_diagram.nc`; `progress` a tqdm bar;
     `on_chunk(psi0_deg, computed: bool)` called after each chunk; `batch` `"scan"` (one
     compiled call per $\Psi_0$), `"vmap"` (every $\Psi_0$ still to compute in one vmapped
@@ -267,9 +285,10 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     import xarray as xr
 
     psis, gaps = check_grid(psi0_deg, gaps, s0, "phase_diagram")
-    mesh = Mesh(n, refine)
+    layout = _layout(creases, psis, s0)
+    mesh = Mesh(n, refine, centres=layout) if layout else Mesh(n, refine)
     ckey = _contact_key(contact)
-    attrs = _attrs(gaps, s0, n, refine, ckey)
+    attrs = _attrs(gaps, s0, n, refine, ckey, layout)
     if out is not None:
         os.makedirs(os.path.join(out, "chunks"), exist_ok=True)
     g_arr = jnp.asarray(gaps, jnp.float64)
@@ -288,11 +307,12 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     if batch == "vmap" and todo:
         # one call for every chunk still missing (the finished ones were read back above)
         vals = jax.device_get(_grid(jnp.asarray([math.radians(p) for p in todo], jnp.float64), g_arr, s0_arr, mesh,
-                                     contact=ckey))
+                                     contact=ckey, layout=layout))
         batched = {p: {k: v[i] for k, v in vals.items()} for i, p in enumerate(todo)}
     sharded = None
     if batch == "shard":
-        sharded = _sharded(mesh, Continuation(), None if devices is None else tuple(devices), per_device, split, ckey)
+        sharded = _sharded(mesh, Continuation(), None if devices is None else tuple(devices), per_device, split, ckey,
+                           layout)
     chunks, computed = [], []
     it = psis
     if progress and lead:
@@ -310,7 +330,7 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
             vals = batched.pop(p, None)
             if vals is None:
                 vals = jax.device_get(_chunk(jnp.asarray(math.radians(p), jnp.float64), g_arr, s0_arr, mesh,
-                                             contact=ckey))
+                                             contact=ckey, layout=layout))
             ds = _chunk_dataset(p, gaps, vals, attrs)
             if out is not None and lead:
                 _write(ds, _chunk_path(out, p))
@@ -332,6 +352,22 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     full.attrs["computed_chunks"] = computed
     full.attrs["batch"] = batch
     return full
+
+
+def _layout(creases, psis, s0):
+    """`creases` (positions, fractions of L) as a sorted static tuple, validated with the
+    grid's fold angles; () for None."""
+    if creases is None:
+        return ()
+    try:
+        layout = tuple(sorted(float(c) for c in creases))
+    except (TypeError, ValueError):
+        raise ValueError(f"creases must be a sequence of positions in (0, 1), got {creases!r}") from None
+    if not layout:
+        raise ValueError("creases must hold at least one position")
+    for p in psis:  # positions inside the strip, and no overlap beyond the rule at any fold angle
+        Creases.from_degrees(layout, [p] * len(layout), [float(s0)] * len(layout))
+    return layout
 
 
 def termination_gaps(psi0_deg, *, s0=0.02, n=100):

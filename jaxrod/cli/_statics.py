@@ -118,6 +118,12 @@ def _cmd_phase_diagram(args):
         import jaxrod as jr
 
         jr.Mesh(args.n, args.refine)
+        layout = None
+        if args.creases_at is not None:
+            layout = _parse_list(args.creases_at, "creases-at")
+            from ..branches._phase import _layout
+
+            _layout(layout, psis, args.s0)
     except ValueError as e:
         raise InputError(str(e)) from None
     import jax  # joined to the other processes by `main` (`start_distributed`) when asked
@@ -133,19 +139,20 @@ def _cmd_phase_diagram(args):
     t0 = time.time()
     try:
         ds = jr.phase_diagram(psis, gaps, s0=args.s0, n=args.n, refine=args.refine, out=args.out,
-                              batch=args.batch, split=args.split, progress=jax.process_index() == 0)
+                              batch=args.batch, split=args.split, progress=jax.process_index() == 0, creases=layout)
     except ValueError as e:  # a multi-process run without a shared --out
         raise InputError(str(e)) from None
     wall = time.time() - t0
     if jax.process_index() != 0:
         return EXIT_OK  # process 0 draws, prints and reports
-    tg = None if args.no_termination else termination_gaps(psis, s0=args.s0, n=args.n)
+    # the termination gaps are those of the centred crease: not drawn for a crease layout
+    tg = None if (args.no_termination or layout) else termination_gaps(psis, s0=args.s0, n=args.n)
     png = os.path.join(args.out, "phase_diagram.png")
     jr.plot_phase_diagram(ds, png, termination_gaps=tg,
                           title=f"critical clamp angles, s0/L = {args.s0:g}, n = {args.n}, refine = {args.refine:g}")
     rec = {"out": args.out, "netcdf": os.path.join(args.out, "phase_diagram.nc"), "png": png,
            "psi0_deg": psis, "gaps": gaps, "s0": args.s0, "n": args.n, "refine": args.refine,
-           "computed_chunks": ds.attrs["computed_chunks"], "wall_s": wall, "batch": ds.attrs["batch"],
+           "creases_at": layout, "computed_chunks": ds.attrs["computed_chunks"], "wall_s": wall, "batch": ds.attrs["batch"],
            "devices": int(ds.attrs["device_count"]), "processes": int(ds.attrs["process_count"]),
            "termination_gaps": None if tg is None else {f"{k:g}": [_fin(a) for a in v] for k, v in tg.items()}}
     # paths whose outcome is unknown although their start state exists (the continuation
@@ -217,6 +224,9 @@ def register(sub):
     q.add_argument("--split", choices=("shard_map", "sharding"), default="shard_map",
                    help="--batch shard: jax.shard_map (each device runs its own loops) or jit with NamedSharding "
                         "(default %(default)s)")
+    q.add_argument("--creases-at", default=None, metavar="LIST",
+                   help="crease positions in L (comma list): a crease of each Psi0 at every one of them "
+                        "instead of the centred crease (termination gaps are then not drawn)")
     q.add_argument("--no-termination", action="store_true",
                    help="do not compute the termination gaps G* (vertical lines) for the figure")
     q.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
