@@ -75,12 +75,23 @@ def test_combination_and_fallback():
     assert e.result == jr.RESULTS.landing_failed and e.start_result == jr.RESULTS.start_substituted
 
 
+def test_cli_defaults_are_extrapolated_at_n_100():
+    """`jaxrod snap-angles` extrapolates by default, from N = 100 and 2N (the whole query is
+    run nightly below; CI runs the same command's JSON on one mesh in test_snap.py and the
+    extrapolation itself through the API above)."""
+    from jaxrod.cli._main import DEFAULTS, _build_parser
+
+    assert DEFAULTS["n"] == 100
+    args = _build_parser().parse_args(["snap-angles"])
+    assert args.extrapolate is True and args.n == 100
+
+
+@pytest.mark.slow  # 57 s on 2 cores (the CLI's own extrapolated program at two meshes)
 def test_cli_default_is_extrapolated(capsys):
     """`jaxrod snap-angles` extrapolates by default, from N and 2N (N = 100 unless --n):
     checked at N = 24 (the default mesh runs the same programs at another size)."""
-    from jaxrod.cli._main import DEFAULTS, main
+    from jaxrod.cli._main import main
 
-    assert DEFAULTS["n"] == 100
     assert main(["snap-angles", "--psi0", "60", "--gap", "0.5", "--n", "24", "--json"]) == 0
     rec = json.loads(capsys.readouterr().out)
     x = jr.snap_angles_extrapolated(jr.make_scene(60.0, 0.5, 0.0, n=24))

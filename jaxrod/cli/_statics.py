@@ -149,7 +149,8 @@ def _cmd_phase_diagram(args):
     tg = None if (args.no_termination or layout) else termination_gaps(psis, s0=args.s0, n=args.n)
     png = os.path.join(args.out, "phase_diagram.png")
     jr.plot_phase_diagram(ds, png, termination_gaps=tg,
-                          title=f"critical clamp angles, s0/L = {args.s0:g}, n = {args.n}, refine = {args.refine:g}")
+                          title=f"critical clamp angles, s0/L = {args.s0:g}, n = {args.n}, refine = {args.refine:g}"
+                          + (f"; creases at {', '.join(f'{c:g}' for c in layout)} L" if layout else ""))
     rec = {"out": args.out, "netcdf": os.path.join(args.out, "phase_diagram.nc"), "png": png,
            "psi0_deg": psis, "gaps": gaps, "s0": args.s0, "n": args.n, "refine": args.refine,
            "creases_at": layout, "computed_chunks": ds.attrs["computed_chunks"], "wall_s": wall, "batch": ds.attrs["batch"],

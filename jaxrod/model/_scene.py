@@ -190,18 +190,20 @@ class Strip(eqx.Module):
         self.centred = creases is None or not (is_concrete_pair(psi0) and float(psi0) == math.pi)
 
     @classmethod
-    def from_physical(cls, *, youngs_modulus, density, thickness, width, length, psi0=math.pi, s0=None):
+    def from_physical(cls, *, youngs_modulus, density, thickness, width, length, psi0=math.pi, s0=None,
+                      creases=None):
         r"""A strip from SI material data: $B = E t^3 w/12$, $\lambda = \rho t w$.
 
         **Arguments:** `youngs_modulus` $E$ (Pa), `density` $\rho$ (kg/m^3), `thickness`
-        $t$ (m), `width` $w$ (m), `length` $L$ (m), `psi0` (rad), `s0` (m; default 0.02 L).
+        $t$ (m), `width` $w$ (m), `length` $L$ (m), `psi0` (rad), `s0` (m; default 0.02 L),
+        `creases` (a `Creases` with positions and widths in m).
         """
         for name, v in [("youngs_modulus", youngs_modulus), ("density", density),
                         ("thickness", thickness), ("width", width)]:
             check_param(name, v, lo=0.0)
         B = youngs_modulus * thickness**3 * width / 12.0
         lam = density * thickness * width
-        return cls(psi0=psi0, s0=s0, length=length, bending_stiffness=B, line_density=lam)
+        return cls(psi0=psi0, s0=s0, length=length, bending_stiffness=B, line_density=lam, creases=creases)
 
     @property
     def speed_gauge(self):
