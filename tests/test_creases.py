@@ -309,3 +309,16 @@ def test_phase_diagram_of_a_crease_layout_equals_snap_angles(tmp_path):
                 assert int(ds[f"kind_{name}"].values[i, j]) == int(q.kind)
     again = jr.phase_diagram(psis, gaps, n=N, creases=[0.3, 0.7], out=str(tmp_path), progress=False)
     assert again.attrs["computed_chunks"] == []
+
+
+@pytest.mark.slow
+def test_termination_gap_of_a_crease_layout():
+    """Creases of 120 deg at 0.3 L and 0.7 L: both paths snap 0.01 below G* and neither
+    0.01 above it. (Their two snaps are the two folds of one S-shaped branch, so both paths
+    end at its cusp: measured G* = 0.96146 for both at N = 48.)"""
+    tg = jr.termination_gap(120.0, n=N, creases=[0.3, 0.7])
+    assert tg.reason_up == tg.reason_down == "cusp"
+    for g, snaps in ((tg.gap_up - 0.01, True), (tg.gap_up + 0.01, False)):
+        r = jr.snap_angles(pair(0.3, 0.7, 120.0, 120.0, gap=g))
+        assert bool(r.up.snaps) is snaps and bool(r.down.snaps) is snaps
+        assert r.up.result == r.down.result == jr.RESULTS.successful

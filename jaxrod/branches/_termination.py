@@ -179,11 +179,22 @@ class TerminationGap(NamedTuple):
         return {k: clean(v) for k, v in self._asdict().items()}
 
 
+def _with_fold(base, psi0, gap=None):
+    """`base` with fold angle `psi0` (rad): its centred crease's, or, for a strip with a crease
+    layout (`termination_gap(..., creases=...)`), every crease's; and the gap `gap` if given."""
+    if base.strip.creases is None:
+        sc = eqx.tree_at(lambda s: s.strip.psi0, base, psi0)
+    else:
+        cr = base.strip.creases
+        sc = eqx.tree_at(lambda s: s.strip.creases.angles, base, jnp.full(cr.angles.shape, psi0, jnp.result_type(psi0)))
+    return sc if gap is None else eqx.tree_at(lambda s: s.clamps.gap, sc, gap)
+
+
 @eqx.filter_jit
 def _snap_at(base, psi0, gap):
     from ._snap import snap_angles
 
-    scene = eqx.tree_at(lambda s: (s.strip.psi0, s.clamps.gap), base, (psi0, gap))
+    scene = _with_fold(base, psi0, gap)
     r = snap_angles(scene)
     from ..statics import initial_state
 
@@ -199,10 +210,12 @@ def _snap_at(base, psi0, gap):
 
 
 def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
-                    progress=False) -> TerminationGap:
+                    progress=False, creases=None) -> TerminationGap:
     r"""The termination gaps $G^\ast/L$ of the snap-up and snap-down paths at fold angle
     `psi0_deg` (degrees), by scan + bisection on [`jaxrod.snap_angles`][] (see the module
-    docstring), to `tol` in $G/L$. Needs float64.
+    docstring), to `tol` in $G/L$. `creases`: crease positions (fractions of L) for a strip
+    with a crease of fold angle `psi0_deg` at each instead of the centred crease (as
+    `jaxrod.phase_diagram(..., creases=...)`). Needs float64.
 
     Returns a [`jaxrod.TerminationGap`][]. One compilation per `(n, s0 dtype)`; each
     evaluation is one `snap_angles` call (~0.3 s at n = 100)."""
@@ -218,7 +231,13 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
     grid = sorted(float(g) for g in grid)
     if not grid or grid[0] <= 0.0 or grid[-1] >= 1.0:
         raise ValueError(f"grid must hold gaps in (0, 1), got {grid!r}")
-    base = make_scene(float(psi0_deg), 0.5, s0=s0, n=n)
+    if creases is None:
+        base = make_scene(float(psi0_deg), 0.5, s0=s0, n=n)
+    else:  # a crease of fold angle Psi0 at each position (fractions of L)
+        from ._phase import _layout
+
+        layout = _layout(creases, [float(psi0_deg)], s0)
+        base = make_scene(180.0, 0.5, s0=s0, n=n, creases=[(c, float(psi0_deg)) for c in layout])
     if float(psi0_deg) == 180.0:
         # the flat strip: no crease, the snap at the branch point keeps its size relative to
         # the buckle amplitude as G -> L (tests/test_termination.py checks it snaps at
@@ -363,7 +382,7 @@ def _cusp_gap(base, psi0, gap, theta, force, alpha, mode):
     from ._critical import cusp_point
 
     def g(p):
-        scene = eqx.tree_at(lambda s: (s.strip.psi0, s.clamps.gap), base, (p, gap))
+        scene = _with_fold(base, p, gap)
         cp = cusp_point(scene, theta, force, alpha, mode)
         return cp.gap, cp.result == RESULTS.successful
 
@@ -377,7 +396,7 @@ def _fold_curve(base, psi0, gap, theta, force, alpha, mode):
     from ._critical import critical_point
     from ._critical_curve import continue_critical
 
-    scene = eqx.tree_at(lambda s: (s.strip.psi0, s.clamps.gap), base, (psi0, gap))
+    scene = _with_fold(base, psi0, gap)
     cp = critical_point(scene, theta, force, alpha, mode, 1)
     c = continue_critical(scene, cp, kind=1)
     return dict(ok=cp.result == RESULTS.successful, end_gap=c.end_gap, end_reason=c.end_reason, count=c.count,
@@ -423,7 +442,7 @@ def _state_fold_gap(base, psi0, gap, sgn):
     from ..statics import initial_state_signed
     from ..statics import mode_parity
 
-    sc0 = eqx.tree_at(lambda s: (s.strip.psi0, s.clamps.gap), base, (psi0, gap))
+    sc0 = _with_fold(base, psi0, gap)
     eq = initial_state_signed(lax.stop_gradient(sc0), sgn)
     K = kkt.structured(eq.theta, eq.force, lax.stop_gradient(sc0))
     v = kkt.modes(K, kkt.smallest_eigenvalues(K, 4))
@@ -432,7 +451,7 @@ def _state_fold_gap(base, psi0, gap, sgn):
     v_asym = v[:, jnp.argmax(par < 0)]
 
     def g(p):
-        sc = eqx.tree_at(lambda s: s.strip.psi0, sc0, p)
+        sc = _with_fold(sc0, p)
         out, ok = [], []
         for mode, kind in ((v_sym, 1), (v_asym, 2)):
             cp = critical_point(sc, eq.theta, eq.force, gap, mode, kind, parameter=Gap())
