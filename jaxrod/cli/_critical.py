@@ -34,6 +34,9 @@ def register(sub):
     p.add_argument("--n", type=int, default=100, metavar="N", help="number of segments, even, >= 8 (default %(default)d)")
     p.add_argument("--tol", type=_number, default=1e-5, metavar="TOL",
                    help="bracket width in G/L (default %(default)g)")
+    p.add_argument("--creases-at", default=None, metavar="LIST",
+                   help="crease positions in L (comma list): a crease of fold angle --psi0 at each, "
+                        "instead of the centred crease")
     p.add_argument("--progress", action="store_true", help="show a progress bar on stderr")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     p.set_defaults(handler=_cmd_termination_gap)
@@ -48,11 +51,18 @@ def _cmd_termination_gap(args):
         raise InputError(f"tol must lie in (0, 0.1), got {args.tol!r}")
     try:
         jr.make_scene(args.psi0, 0.5, s0=args.s0, n=args.n)  # validates psi0, s0, n
-        r = jr.termination_gap(args.psi0, s0=args.s0, n=args.n, tol=args.tol, progress=args.progress)
+        layout = None
+        if args.creases_at is not None:
+            try:
+                layout = [float(x) for x in args.creases_at.split(",") if x.strip()]
+            except ValueError:
+                raise InputError(f"creases-at: expected a comma list of positions, got {args.creases_at!r}") from None
+        r = jr.termination_gap(args.psi0, s0=args.s0, n=args.n, tol=args.tol, progress=args.progress,
+                               creases=layout)
     except ValueError as e:
         raise InputError(str(e)) from None
     rec = r.to_dict()
-    rec.update(s0=args.s0, n=args.n, tol=args.tol)
+    rec.update(s0=args.s0, n=args.n, tol=args.tol, creases_at=layout)
     if args.json:
         print(json.dumps(rec))
     else:

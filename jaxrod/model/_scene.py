@@ -117,12 +117,6 @@ class Creases(eqx.Module):
                 return False
         return True
 
-    def to_list(self, length=1.0):
-        """`[{"position": c_k / L, "psi0_deg": ..., "s0": s0_k / L}, ...]` (JSON-ready)."""
-        L = float(length)
-        return [{"position": float(c) / L, "psi0_deg": math.degrees(float(a)), "s0": float(w) / L}
-                for c, a, w in zip(np.asarray(self.positions), np.asarray(self.angles), np.asarray(self.widths))]
-
 
 def _check_overlaps(pos, ang, wid):
     order = np.argsort(pos)
