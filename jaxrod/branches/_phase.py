@@ -110,6 +110,11 @@ def _contact_key(contact):
     return (float(contact.thickness), float(contact.stiffness), float(contact.exclusion))
 
 
+def _kw(layout):
+    """`layout` as a keyword only where there is one (stand-ins for `_chunk` need not know it)."""
+    return {"layout": layout} if layout else {}
+
+
 def _strip(psi0, s0, layout):
     """The strip of a grid point: the centred crease of fold angle `psi0` (rad), or with a
     `layout` (crease positions, fractions of L) one crease of that angle at each."""
@@ -170,7 +175,7 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), con
 @eqx.filter_jit
 def _grid(psis, gaps, s0, mesh, settings=Continuation(), contact=None, layout=()):
     """All chunks in one call: `vmap` over the fold angles (rad) of `_chunk`."""
-    return jax.vmap(lambda p: _chunk(p, gaps, s0, mesh, settings=settings, contact=contact, layout=layout))(psis)
+    return jax.vmap(lambda p: _chunk(p, gaps, s0, mesh, settings=settings, contact=contact, **_kw(layout)))(psis)
 
 
 def _resolve_batch(batch):
@@ -187,7 +192,7 @@ def _resolve_batch(batch):
 def _sharded(mesh, settings, devices, per_device, mode, contact=None, layout=()):
     """One `ShardedMap` of `_chunk` per mesh and split (so repeated calls reuse its compilation)."""
     return ShardedMap(lambda psi0, shared: _chunk(psi0, shared[0], shared[1], mesh, settings=settings,
-                                                  contact=contact, layout=layout),
+                                                  contact=contact, **_kw(layout)),
                       devices=devices, per_device=per_device, mode=mode)
 
 
@@ -307,7 +312,7 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     if batch == "vmap" and todo:
         # one call for every chunk still missing (the finished ones were read back above)
         vals = jax.device_get(_grid(jnp.asarray([math.radians(p) for p in todo], jnp.float64), g_arr, s0_arr, mesh,
-                                     contact=ckey, layout=layout))
+                                     contact=ckey, **_kw(layout)))
         batched = {p: {k: v[i] for k, v in vals.items()} for i, p in enumerate(todo)}
     sharded = None
     if batch == "shard":
@@ -330,7 +335,7 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
             vals = batched.pop(p, None)
             if vals is None:
                 vals = jax.device_get(_chunk(jnp.asarray(math.radians(p), jnp.float64), g_arr, s0_arr, mesh,
-                                             contact=ckey, layout=layout))
+                                             contact=ckey, **_kw(layout)))
             ds = _chunk_dataset(p, gaps, vals, attrs)
             if out is not None and lead:
                 _write(ds, _chunk_path(out, p))
