@@ -71,6 +71,7 @@ def test_too_large_a_step_is_flagged():
     assert np.all(np.isfinite(np.asarray(tr.kinetic)[saved][:-1]))
 
 
+@pytest.mark.slow  # 47 s on 2 cores; CI flags huge steps by the same monitor (test_properties.py, test_huge_step_is_flagged)
 def test_energy_monitor_threshold():
     """The monitor stops a run at the documented threshold: the same run with
     energy_tol = 1e-4 stops (energy_drift) where the error first passes 1e-4 of the start

@@ -61,7 +61,7 @@ from ._continuation import Continuation, SymmetricAlpha
 from ..statics import float_scene, solve_equilibrium
 from ..statics import initial_state_signed, still_tracked
 from .._misc import check_grid, package_version, run_if as _run_if, run_if_each
-from ..model import Clamps, Contact, Creases, Mesh, Scene, Strip
+from ..model import Clamps, Contact, Creases, crease_layout, Mesh, Scene, Strip
 from ._snap import _snap_angles_from
 from ..results import RESULTS
 from ..sweeps import agree, MODES, ShardedMap
@@ -360,19 +360,9 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
 
 
 def _layout(creases, psis, s0):
-    """`creases` (positions, fractions of L) as a sorted static tuple, validated with the
-    grid's fold angles; () for None."""
-    if creases is None:
-        return ()
-    try:
-        layout = tuple(sorted(float(c) for c in creases))
-    except (TypeError, ValueError):
-        raise ValueError(f"creases must be a sequence of positions in (0, 1), got {creases!r}") from None
-    if not layout:
-        raise ValueError("creases must hold at least one position")
-    for p in psis:  # positions inside the strip, and no overlap beyond the rule at any fold angle
-        Creases.from_degrees(layout, [p] * len(layout), [float(s0)] * len(layout))
-    return layout
+    """`creases` (positions, fractions of L) as a sorted static tuple (`crease_layout`); ()
+    for None."""
+    return () if creases is None else crease_layout(creases, psis, s0)
 
 
 def termination_gaps(psi0_deg, *, s0=0.02, n=100):

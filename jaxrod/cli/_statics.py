@@ -120,10 +120,7 @@ def _cmd_phase_diagram(args):
         jr.Mesh(args.n, args.refine)
         layout = None
         if args.creases_at is not None:
-            layout = _parse_list(args.creases_at, "creases-at")
-            from ..branches._phase import _layout
-
-            _layout(layout, psis, args.s0)
+            layout = list(jr.model.crease_layout(_parse_list(args.creases_at, "creases-at"), psis, args.s0))
     except ValueError as e:
         raise InputError(str(e)) from None
     import jax  # joined to the other processes by `main` (`start_distributed`) when asked

@@ -298,11 +298,15 @@ def observables(t, y, scene, protocol, d=None):
     k = sc.mesh.n // 2
     speed = safe_norm(v)
     target = jnp.stack([sc.clamps.gap, jnp.zeros((), x.dtype)])
-    cpos = sc.strip.crease_list()[0].astype(x.dtype)
+    if sc.strip.creases is None:  # the centred crease sits on node N/2: its height and speed are the fold's
+        c_height, c_speed = x[k, 1][None], speed[k][None]
+    else:
+        cpos = sc.strip.crease_list()[0].astype(x.dtype)
+        c_height, c_speed = at_arclength(x, d.s, cpos)[:, 1], safe_norm(at_arclength(v, d.s, cpos))
     return dict(
         fold_height=x[k, 1],
-        crease_height=at_arclength(x, d.s, cpos)[:, 1],
-        crease_speed=safe_norm(at_arclength(v, d.s, cpos)),
+        crease_height=c_height,
+        crease_speed=c_speed,
         fold_velocity=v[k],
         fold_speed=speed[k],
         bending=bending_energy(theta, sc, d),

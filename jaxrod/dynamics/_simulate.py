@@ -385,7 +385,10 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     t_end = jnp.max(jnp.where(jnp.isfinite(sol.ts[0]), sol.ts[0], 0.0))
     t_end = jnp.maximum(t_end, 0.0)
     v_s, t_peak = _refine_peak(ts, o["fold_speed"])
-    v_s_creases = jax.vmap(lambda f: _refine_peak(ts, f)[0], in_axes=1)(o["crease_speed"])
+    if scene.strip.creases is None:  # the centred crease's speed is the fold's
+        v_s_creases = v_s[None]
+    else:
+        v_s_creases = jax.vmap(lambda f: _refine_peak(ts, f)[0], in_axes=1)(o["crease_speed"])
     fh = o["fold_height"]
     # first crossing of the fold height through 0 in the snapping direction
     s = direction * fh

@@ -549,6 +549,22 @@ def parse_creases(creases, length=1.0, s0=0.02):
     return Creases.from_degrees(pos * length, ang, wid * length, length=length)
 
 
+def crease_layout(positions, psi0_deg, s0=0.02):
+    """Crease positions (fractions of L) as a sorted tuple, checked for every fold angle in
+    `psi0_deg` (degrees; a crease of that angle and width `s0` at each position): inside the
+    strip, and no overlap beyond the rule of `Creases`. `ValueError` naming the crease
+    otherwise."""
+    try:
+        layout = tuple(sorted(float(c) for c in positions))
+    except (TypeError, ValueError):
+        raise ValueError(f"creases must be a sequence of positions in (0, 1), got {positions!r}") from None
+    if not layout:
+        raise ValueError("creases must hold at least one position")
+    for p in np.atleast_1d(np.asarray(psi0_deg, float)):
+        Creases.from_degrees(layout, [float(p)] * len(layout), [float(s0)] * len(layout))
+    return layout
+
+
 def make_scene(psi0_deg=60.0, gap=0.5, alpha_deg=0.0, *, alpha_right_deg=None, s0=0.02, n=100,
                refine=1.0, stretching=None, gravity=None, contact=None, creases=None) -> Scene:
     """Convenience constructor in nondimensional units with angles in degrees.
