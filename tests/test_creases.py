@@ -39,11 +39,10 @@ def test_one_centred_crease_is_the_classic_strip():
         da = jr.discretize(eqx.tree_at(lambda s: s.strip, a, a.strip.unfolded(u)))
         db = jr.discretize(eqx.tree_at(lambda s: s.strip, b, b.strip.unfolded(u)))
         np.testing.assert_array_equal(np.asarray(da.phi0), np.asarray(db.phi0))
-    for side in ("up", "down"):
-        ea, eb = jr.initial_state(a, side), jr.initial_state(b, side)
-        assert ea.result == eb.result == jr.RESULTS.successful
-        np.testing.assert_allclose(np.asarray(ea.theta), np.asarray(eb.theta), rtol=0, atol=1e-13)
-        assert float(jr.crease_heights(eb)[0]) == pytest.approx(float(jr.fold_height(ea)), abs=1e-14)
+    ea, eb = jr.initial_state(a, "up"), jr.initial_state(b, "up")
+    assert ea.result == eb.result == jr.RESULTS.successful
+    np.testing.assert_allclose(np.asarray(ea.theta), np.asarray(eb.theta), rtol=0, atol=1e-13)
+    assert float(jr.crease_heights(eb)[0]) == pytest.approx(float(jr.fold_height(ea)), abs=1e-14)
 
 
 def test_crease_profiles_add():
@@ -261,6 +260,32 @@ def test_cli_bad_crease_exits_2(value, capsys):
     assert len(err) == 1 and "crease" in err[0]
 
 
+def test_crease_points_in_the_dynamics_observables():
+    """The dynamics' per-crease observables: each crease's height and speed are the node
+    positions and velocities interpolated to its arclength (checked against NumPy on a moving
+    state of a two-crease strip); a strip without creases reads them off the fold node."""
+    from jaxrod.dynamics._equations import Protocol, kinematics, observables
+
+    sc = pair(0.3, 0.65)
+    eq = jr.initial_state(sc, "up")
+    omega = jnp.sin(jnp.linspace(0.0, 3.0, N))
+    o = observables(0.0, (eq.theta, omega), sc, Protocol(0.0, 0.0))
+    d = jr.discretize(sc)
+    x, v = (np.asarray(a) for a in kinematics(eq.theta, omega, d))
+    s_nodes = np.asarray(d.s)
+    for k, c in enumerate((0.3, 0.65)):
+        y = np.interp(c, s_nodes, x[:, 1])
+        vel = np.array([np.interp(c, s_nodes, v[:, 0]), np.interp(c, s_nodes, v[:, 1])])
+        assert float(o["crease_height"][k]) == pytest.approx(y, abs=1e-13)
+        assert float(o["crease_speed"][k]) == pytest.approx(np.linalg.norm(vel), rel=1e-12)
+    classic = jr.make_scene(60.0, 0.5, n=N)
+    e1 = jr.initial_state(classic, "up")
+    o1 = observables(0.0, (e1.theta, omega), classic, Protocol(0.0, 0.0))
+    assert float(o1["crease_height"][0]) == float(o1["fold_height"])
+    assert float(o1["crease_speed"][0]) == float(o1["fold_speed"])
+
+
+@pytest.mark.slow  # 26 s on 2 cores; CI checks the per-crease observables above
 def test_snap_of_a_symmetric_pair_moves_both_creases_alike():
     """A symmetric fold of a mirror-symmetric set (up, creases at 0.25 L and 0.75 L): the
     snap keeps the mirror symmetry, so both creases reach the same peak speed; the run is
@@ -324,6 +349,7 @@ def test_termination_gap_of_a_crease_layout():
         assert r.up.result == r.down.result == jr.RESULTS.successful
 
 
+@pytest.mark.slow  # 26 s on 2 cores; CI checks the orders of the merging limit above
 def test_states_converge_at_second_order_in_n():
     """Fold height, both crease heights and the bending energy of the up state of an
     asymmetric pair (creases on nodes of every mesh, so the heights are node values) at

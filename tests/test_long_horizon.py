@@ -87,6 +87,7 @@ def test_energy_monitor_threshold():
     assert 0.5 < float(tr.t_end) < 1.5
 
 
+@pytest.mark.slow  # 37 s on 2 cores; CI checks v_s against an adaptive reference (test_rattle.py)
 def test_stop_at_snap_is_unchanged():
     """A snap run that stops at the first overshoot keeps the snap's step (courant 0.45)
     and a small energy error; v_s is the same as with the ringing step to 1e-3."""

@@ -142,6 +142,7 @@ def test_failed_refinement_says_no_derivative():
     assert float(bad.alpha_c) == float(moved.alpha_c)
 
 
+@pytest.mark.slow  # 16 s on 2 cores; CI checks the combined codes of failed landings and substituted starts (test_extrapolate.py)
 def test_extrapolated_paths_carry_both_meshes_codes():
     """A continuation cut short on either mesh is not a clean 'does not snap': the combined
     path takes the code of the mesh that failed (the fine mesh's where both did), and keeps
