@@ -77,7 +77,7 @@ from jax import lax
 import numpy as np
 
 from .._misc import check_param
-from ..model import make_scene
+from ..model import crease_layout, make_scene
 from ..results import RESULTS, result_name
 
 
@@ -234,9 +234,7 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
     if creases is None:
         base = make_scene(float(psi0_deg), 0.5, s0=s0, n=n)
     else:  # a crease of fold angle Psi0 at each position (fractions of L)
-        from ._phase import _layout
-
-        layout = _layout(creases, [float(psi0_deg)], s0)
+        layout = crease_layout(creases, float(psi0_deg), s0)
         base = make_scene(180.0, 0.5, s0=s0, n=n, creases=[(c, float(psi0_deg)) for c in layout])
     if float(psi0_deg) == 180.0:
         # the flat strip: no crease, the snap at the branch point keeps its size relative to

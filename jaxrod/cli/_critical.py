@@ -51,12 +51,9 @@ def _cmd_termination_gap(args):
         raise InputError(f"tol must lie in (0, 0.1), got {args.tol!r}")
     try:
         jr.make_scene(args.psi0, 0.5, s0=args.s0, n=args.n)  # validates psi0, s0, n
-        layout = None
-        if args.creases_at is not None:
-            try:
-                layout = [float(x) for x in args.creases_at.split(",") if x.strip()]
-            except ValueError:
-                raise InputError(f"creases-at: expected a comma list of positions, got {args.creases_at!r}") from None
+        from ._statics import _parse_list
+
+        layout = None if args.creases_at is None else _parse_list(args.creases_at, "creases-at")
         r = jr.termination_gap(args.psi0, s0=args.s0, n=args.n, tol=args.tol, progress=args.progress,
                                creases=layout)
     except ValueError as e:

@@ -241,8 +241,7 @@ def make_scene_from_args(args, contact=None):
     try:
         return jr.make_scene(args.psi0, args.gap, args.alpha, alpha_right_deg=args.alpha_right, s0=args.s0,
                              n=args.n, refine=args.refine, stretching=stretching, gravity=gravity, contact=model,
-                             creases=[c if len(c) == 3 else (*c, args.s0) for c in args.crease]
-                             if getattr(args, "crease", None) else None)
+                             creases=getattr(args, "crease", None) or None)  # S0 defaults to --s0
     except ValueError as e:
         raise InputError(str(e)) from None
 

@@ -133,6 +133,21 @@ def _check_overlaps(pos, ang, wid):
             start = k
 
 
+def _crease_arrays(strip):
+    """`strip`'s creases in `Strip.crease_list` order as NumPy `(positions, angles, widths)`,
+    or None where a leaf is traced."""
+    cr = strip.creases
+    leaves = [strip.length] + ([strip.psi0, strip.s0] if strip.centred else []) + (
+        [] if cr is None else [cr.positions, cr.angles, cr.widths])
+    if not is_concrete_pair(*leaves):
+        return None
+    parts = ([(0.5 * float(strip.length), float(strip.psi0), float(strip.s0))] if strip.centred else [])
+    arrays = [np.array([p[i] for p in parts], float) for i in range(3)]
+    if cr is not None:
+        arrays = [np.append(a, np.asarray(b, float)) for a, b in zip(arrays, (cr.positions, cr.angles, cr.widths))]
+    return tuple(arrays)
+
+
 class Strip(eqx.Module):
     r"""A strip of length $L$, bending stiffness $B$, mass per length $\lambda$, with
     one crease of fold angle $\Psi_0$ (radians, interior angle; $\pi$ = flat) and fold
@@ -171,10 +186,6 @@ class Strip(eqx.Module):
             if np.any(np.asarray(creases.positions) >= L):
                 raise ValueError(f"crease positions must lie in (0, L) = (0, {L:g}), got "
                                  f"{np.asarray(creases.positions).tolist()}")
-            if is_concrete_pair(psi0, s0, creases.angles, creases.widths) and float(psi0) < math.pi:
-                _check_overlaps(np.append(np.asarray(creases.positions, float), 0.5 * L),
-                                np.append(np.asarray(creases.angles, float), float(psi0)),
-                                np.append(np.asarray(creases.widths, float), float(s0)))
         self.psi0 = _leaf(psi0)
         self.s0 = _leaf(s0)
         self.length = _leaf(length)
@@ -182,6 +193,9 @@ class Strip(eqx.Module):
         self.line_density = _leaf(line_density)
         self.creases = creases
         self.centred = creases is None or not (is_concrete_pair(psi0) and float(psi0) == math.pi)
+        arrays = None if creases is None else _crease_arrays(self)
+        if arrays is not None:  # the centred crease with the others
+            _check_overlaps(*arrays)
 
     @classmethod
     def from_physical(cls, *, youngs_modulus, density, thickness, width, length, psi0=math.pi, s0=None,
@@ -354,13 +368,10 @@ class Mesh(eqx.Module):
         `refine` = 1, needs none)."""
         if refine == 1.0:
             return cls(n, refine, width)
-        leaves = [strip.length] + ([] if strip.creases is None else [strip.creases.positions])
-        if not is_concrete_pair(*leaves):
-            raise ValueError("Mesh.for_strip: the crease positions must be concrete (not traced) to refine around them")
-        L = float(strip.length)
-        pos = ([0.5 * L] if strip.centred else []) + (
-            [] if strip.creases is None else np.asarray(strip.creases.positions, float).tolist())
-        return cls(n, refine, width, tuple(np.asarray(pos) / L))
+        arrays = _crease_arrays(strip)
+        if arrays is None:
+            raise ValueError("Mesh.for_strip: the creases must be concrete (not traced) to refine around them")
+        return cls(n, refine, width, tuple(arrays[0] / float(strip.length)))
 
     def spacing_at(self, x):
         """The segment length (fraction of L) of the segment holding fraction `x`."""
@@ -499,14 +510,11 @@ def _warn_unresolved(strip, mesh):
     """Warn when a segment at a crease is longer than the crease's width 2 s0_k."""
     import warnings
 
-    if not is_concrete_pair(strip.length, strip.creases.positions, strip.creases.widths):
+    arrays = _crease_arrays(strip)
+    if arrays is None:
         return
     L = float(strip.length)
-    cr = strip.creases
-    pos = np.asarray(cr.positions, float)
-    wid = np.asarray(cr.widths, float)
-    if strip.centred and is_concrete_pair(strip.s0):
-        pos, wid = np.append(pos, 0.5 * L), np.append(wid, float(strip.s0))
+    pos, _, wid = arrays
     for c, w in zip(pos, wid):
         h = mesh.spacing_at(c / L) * L
         if h > 2.0 * w:

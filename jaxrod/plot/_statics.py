@@ -80,10 +80,9 @@ def plot_shape(eq, ax=None, label=None, color=None, show_clamps=True):
         ax.plot(xy[mid, 0], xy[mid, 1], "o", markersize=8, markerfacecolor=c, markeredgecolor="k",
                 markeredgewidth=1.0, zorder=5)
     else:  # every crease at its own arclength (the midpoint stays marked, smaller)
-        from ..energy.geometry import at_arclength, discretize
+        from ..statics import crease_points
 
-        pos = np.asarray(eq.scene.strip.crease_list()[0], float)
-        pts = np.asarray(at_arclength(node_positions(eq), discretize(eq.scene).s, pos), float) / L
+        pts = np.asarray(crease_points(eq), float) / L
         ax.plot(pts[:, 0], pts[:, 1], "o", markersize=8, markerfacecolor=c, markeredgecolor="k",
                 markeredgewidth=1.0, zorder=5)
         ax.plot(xy[mid, 0], xy[mid, 1], "o", markersize=3, color="k", zorder=5)

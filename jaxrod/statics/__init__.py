@@ -22,6 +22,7 @@ from ._observables import compression as compression
 from ._observables import curvature as curvature
 from ._observables import energies as energies
 from ._observables import crease_heights as crease_heights
+from ._observables import crease_points as crease_points
 from ._observables import fold_height as fold_height
 from ._observables import node_positions as node_positions
 from ._observables import strains as strains

@@ -40,11 +40,16 @@ def fold_height(eq):
     return node_positions(eq)[eq.scene.mesh.n // 2, 1]
 
 
-def crease_heights(eq):
-    """Height $y(c_k)$ of every crease (`Strip.crease_list` order: the centred crease first,
-    then `Strip.creases`), shape (m,); positions interpolated linearly between nodes."""
+def crease_points(eq):
+    """Position $\mathbf r(c_k)$ of every crease (`Strip.crease_list` order: the centred
+    crease first, then `Strip.creases`), shape (m, 2); interpolated linearly between nodes."""
     pos, _, _ = eq.scene.strip.crease_list()
-    return at_arclength(node_positions(eq), discretize(eq.scene).s, pos.astype(eq.theta.dtype))[:, 1]
+    return at_arclength(node_positions(eq), discretize(eq.scene).s, pos.astype(eq.theta.dtype))
+
+
+def crease_heights(eq):
+    """Height $y(c_k)$ of every crease (`crease_points`), shape (m,)."""
+    return crease_points(eq)[:, 1]
 
 
 def energies(eq):
