@@ -41,7 +41,7 @@ def fold_height(eq):
 
 
 def crease_points(eq):
-    """Position $\mathbf r(c_k)$ of every crease (`Strip.crease_list` order: the centred
+    r"""Position $\mathbf r(c_k)$ of every crease (`Strip.crease_list` order: the centred
     crease first, then `Strip.creases`), shape (m, 2); interpolated linearly between nodes."""
     pos, _, _ = eq.scene.strip.crease_list()
     return at_arclength(node_positions(eq), discretize(eq.scene).s, pos.astype(eq.theta.dtype))
