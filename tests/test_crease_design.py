@@ -109,3 +109,87 @@ def test_crease_position_study():
     assert float(a.up.alpha_c) == pytest.approx(float(b.up.alpha_c), abs=1e-8)
     assert float(a.down.alpha_c) == pytest.approx(float(b.down.alpha_c), abs=1e-8)
     assert math.degrees(float(a.up.alpha_c - a.down.alpha_c)) == pytest.approx(r.widths_deg[2], abs=1e-6)
+
+
+def _fake_studies(monkeypatch, calls, reached=True):
+    """The crease studies as stand-ins returning real result objects (the CLI's wiring is
+    under test here; the studies themselves are tested above)."""
+    def two(up, down, **kw):
+        calls.append(("two", up, down, kw))
+        chk = jd.CreaseCheck(kw["n_check"], up + 0.2, down - 0.3, 20.5, "successful")
+        return jd.TwoCreaseResult((up, down), kw["gap"], kw["n"], [0.3, 0.7], [80.0, 95.0], up + 0.01, down,
+                                  20.0, 10.0, 0.02, [], reached, kw["tol_deg"], chk, 1.0)
+
+    def position(psi0, gap, **kw):
+        calls.append(("position", psi0, gap, kw))
+        chk = jd.CreaseCheck(kw["n_check"], 80.0, -81.0, math.nan, "successful")
+        return jd.PositionResult(psi0, gap, kw["n"], [0.1, 0.5], [150.0, 161.0], 0.5, 161.0, "centre", 0.13, 159.9,
+                                 -1128.0, False, 161.0, chk, chk, 1.0)
+
+    monkeypatch.setattr(jd, "two_crease_study", two)
+    monkeypatch.setattr(jd, "crease_position_study", position)
+
+
+def test_cli_crease_studies(monkeypatch, capsys):
+    import json
+
+    from jaxrod.cli._main import main
+
+    calls = []
+    _fake_studies(monkeypatch, calls)
+    assert main(["design", "--study", "two-creases", "--target-alpha-up", "55", "--target-alpha-down", "-110",
+                 "--gap", "0.6", "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert calls[-1] == ("two", 55.0, -110.0, dict(gap=0.6, n=48, n_check=96, tol_deg=0.02, progress=False))
+    assert rec["study"] == "two-creases" and rec["result"] == "successful"
+    assert rec["positions"] == [0.3, 0.7] and rec["check"]["n"] == 96 and rec["check_errors_deg"] == pytest.approx([0.2, 0.3])
+    assert main(["design", "--study", "crease-position", "--n", "24", "--tol", "0.5", "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert calls[-1] == ("position", 120.0, 0.5, dict(n=24, n_check=48, progress=False))
+    assert rec["where"] == "centre" and rec["result"] == "successful" and rec["interior_smooth"] is False
+    # the text report, and a design that misses its targets: exit 3
+    _fake_studies(monkeypatch, calls, reached=False)
+    assert main(["design", "--study", "two-creases", "--target-alpha-up", "55", "--target-alpha-down", "-110"]) == 3
+    out = capsys.readouterr().out
+    assert "creases at 0.3000, 0.7000 L" in out and "result target_not_reached" in out
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["--study", "two-creases", "--target-alpha-up", "55"], "needs --target-alpha-up and --target-alpha-down"),
+    (["--study", "two-creases", "--target-alpha-up", "55", "--target-alpha-down", "-110", "--psi0", "90"], "psi0"),
+    (["--study", "crease-position", "--target-alpha-up", "55"], "no angle targets"),
+    (["--study", "crease-position", "--psi0", "180"], "psi0"),
+    (["--study", "crease-position", "--gap", "1.2"], "gap"),
+    (["--study", "crease-position", "--n", "7"], "n: must be an even"),
+    (["--study", "crease-position", "--n", "48", "--check-n", "48"], "check-n"),
+    (["--study", "crease-position", "--target-speed", "20"], "target-speed"),
+    (["--study", "crease-position", "--free-s0"], "free-s0"),
+    (["--study", "crease-position", "--s0", "0.03"], "s0"),
+    (["--study", "crease-position", "--starts", "4"], "starts"),
+    (["--study", "crease-position", "--tol", "nan"], "tol"),
+    (["--target-alpha-up", "55", "--gap", "0.5"], "gap: only used with --study"),
+    (["--study", "three-creases"], "invalid choice"),
+])
+def test_cli_crease_studies_bad_input_exits_2(argv, match, monkeypatch, capsys):
+    from jaxrod.cli._main import main
+
+    calls = []
+    _fake_studies(monkeypatch, calls)
+    try:
+        code = main(["design", *argv, "--json"])
+    except SystemExit as e:  # argparse's own refusals
+        code = e.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and match in err[-1] and calls == [], err
+
+
+@pytest.mark.slow  # the real study at N = 48 (about 1 min on 2 cores)
+def test_cli_crease_position_study(capsys):
+    import json
+
+    from jaxrod.cli._main import main
+
+    assert main(["design", "--study", "crease-position", "--psi0", "120", "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["where"] == "centre" and rec["position"] == 0.5 and rec["result"] == "successful"
+    assert abs(rec["width_deg"] - 161.54) < 0.01 and rec["check"]["n"] == 96

@@ -149,6 +149,45 @@ def test_alpha_c_gradient_in_crease_positions_matches_central_differences(asymme
         np.testing.assert_allclose(np.asarray(g), np.asarray(fd), rtol=1e-6)
 
 
+def test_branch_point_derivative_is_the_symmetric_familys(symmetric_pair):
+    """At the branch point of a symmetric pair (the down path) alpha_c is differentiable
+    only along mirror-symmetric changes: spreading the creases apart symmetrically matches
+    central differences of re-solves (which stay symmetric); the derivative along a shift of
+    both creases (antisymmetric) is zero, so moving one crease counts half of the spread;
+    whole snap paths of shifted pairs show why: alpha_c moves the same way for either
+    sign of the shift, like |shift|^(2/3) (an imperfect pitchfork)."""
+    base = pair(0.25, 0.75)
+    path = symmetric_pair.down
+    assert jr.KIND_NAMES[int(path.kind)] == "branch_point"
+
+    @jax.jit
+    def alpha(c, ang):
+        sc = eqx.tree_at(lambda s: (s.strip.creases.positions, s.strip.creases.angles), base, (c, ang))
+        return jr.critical_point(sc, path.theta_before, path.force_before, path.alpha_c, path.mode,
+                                 path.kind).alpha
+
+    c0, a0 = jnp.asarray([0.25, 0.75]), jnp.radians(jnp.asarray([90.0, 90.0]))
+    assert float(alpha(c0, a0)) == pytest.approx(float(path.alpha_c), abs=1e-12)
+    gc, ga = jax.jit(jax.grad(alpha, argnums=(0, 1)))(c0, a0)
+    gc, ga = np.asarray(gc), np.asarray(ga)
+    spread = central_difference(lambda t: alpha(c0 + t[0] * jnp.asarray([-1.0, 1.0]), a0)[None],
+                                jnp.zeros(1), scale=[0.1])[0, 0]
+    fold = central_difference(lambda t: alpha(c0, a0 + t[0])[None], jnp.zeros(1), scale=[0.1])[0, 0]
+    assert abs(float(spread)) > 1e-2 and abs(float(fold)) > 1e-2
+    assert gc[1] - gc[0] == pytest.approx(float(spread), rel=1e-6)
+    assert ga[0] + ga[1] == pytest.approx(float(fold), rel=1e-6)
+    assert abs(gc[0] + gc[1]) < 1e-10 * abs(gc[1]) and gc[1] == pytest.approx(0.5 * float(spread), rel=1e-6)
+    assert abs(ga[0] - ga[1]) < 1e-10 * abs(ga[1])
+    # the paths of pairs shifted by -d and +d: the same change of alpha_c, growing like d^(2/3)
+    change = {}
+    for d in (2e-3, -2e-3, 8e-3):
+        p = jr.snap_angles(pair(0.25 + d, 0.75 + d)).down
+        assert p.result == jr.RESULTS.successful and jr.KIND_NAMES[int(p.kind)] == "fold"
+        change[d] = math.degrees(float(p.alpha_c - path.alpha_c))
+    assert change[2e-3] == pytest.approx(change[-2e-3], rel=0.05)
+    assert 4.0 ** (2 / 3) * 0.8 < change[8e-3] / change[2e-3] < 4.0 ** (2 / 3) * 1.2, change
+
+
 @pytest.mark.slow
 def test_alpha_c_gradient_through_snap_angles(asymmetric_pair):
     """The same derivative through a whole `snap_angles` call (jax.jacrev) against central

@@ -21,6 +21,7 @@ from ._continuation import SymmetricAlpha as SymmetricAlpha
 from ._critical import critical_point as critical_point
 from ._critical import CriticalPoint as CriticalPoint
 from ._critical import cusp_point as cusp_point
+from ._critical import mirror_symmetric_part as mirror_symmetric_part
 from ._critical import CuspPoint as CuspPoint
 from ._critical_curve import continue_critical as continue_critical
 from ._critical_curve import CriticalCurve as CriticalCurve

@@ -245,7 +245,10 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
         J = lax.cond(active & finite, lambda zu: jax.jacfwd(lambda z: res(z, scene_sg))(zu), lambda zu: eye, z_use)
         J = jnp.where(active & finite & jnp.all(jnp.isfinite(J)), J, eye)
         r = jnp.max(jnp.abs(res(z, scene_sg)))
-        z_imp = _implicit_step(lambda z: res(z, scene), sg(z_use), J)
+        # A branch point exists only in a mirror-symmetric scene; its derivative is that of
+        # the symmetric family, taken through the scene's mirror-symmetric part
+        sc_d = scene if which == KIND_FOLD else mirror_symmetric_part(scene)
+        z_imp = _implicit_step(lambda z: res(z, sc_d), sg(z_use), J)
         z = jnp.where(active & finite, z_imp, z)
         t, m, a, vt, vm = unpack(z, N)
         result = RESULTS.where(done & finite, RESULTS.successful,
@@ -265,6 +268,26 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
     fh = positions(t, m, sc)[N // 2, 1]
     return CriticalPoint(alpha=a, theta=t, force=m, mode=vt / nv, mode_force=vm / nv, fold_height=fh,
                          kind=kind.astype(jnp.int32), residual=r, num_steps=k, result=result)
+
+
+def mirror_symmetric_part(scene):
+    r"""The mirror-symmetric part of `scene`: every crease's position, angle and width
+    averaged with its mirror partner's (`Strip.mirrored`), and the clamp angles averaged
+    ($\alpha_L = \alpha_R$). Equal to `scene` where it is mirror-symmetric; its derivative
+    with respect to the scene's leaves is the projection onto mirror-symmetric changes.
+    A branch point's implicit derivative goes through it: at a branch point alpha_c is
+    differentiable only along mirror-symmetric changes (any other change makes the
+    bifurcation imperfect and moves alpha_c like |change|^(2/3)), so the returned
+    derivative is that of the symmetric family, zero along antisymmetric changes."""
+    st = scene.strip
+    if st.creases is not None:
+        mir = st.creases.mirrored(st.length)
+        avg = [0.5 * (jnp.asarray(a) + b) for a, b in zip((st.creases.positions, st.creases.angles,
+                                                          st.creases.widths),
+                                                         (mir.positions, mir.angles, mir.widths))]
+        st = eqx.tree_at(lambda s: (s.creases.positions, s.creases.angles, s.creases.widths), st, tuple(avg))
+    a = 0.5 * (jnp.asarray(scene.clamps.alpha_left) + jnp.asarray(scene.clamps.alpha_right))
+    return eqx.tree_at(lambda s: (s.strip, s.clamps.alpha_left, s.clamps.alpha_right), scene, (st, a, a))
 
 
 # ----- cusp: where a fold pair meets (two-parameter, alpha and the gap) -----------------

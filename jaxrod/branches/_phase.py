@@ -61,7 +61,7 @@ from ._continuation import Continuation, SymmetricAlpha
 from ..statics import float_scene, solve_equilibrium
 from ..statics import initial_state_signed, still_tracked
 from .._misc import check_grid, package_version, run_if as _run_if, run_if_each
-from ..model import Clamps, Contact, Creases, crease_layout, Mesh, Scene, Strip
+from ..model import Clamps, Contact, crease_layout, layout_strip, Mesh, Scene
 from ._snap import _snap_angles_from
 from ..results import RESULTS
 from ..sweeps import agree, MODES, ShardedMap
@@ -115,16 +115,6 @@ def _kw(layout):
     return {"layout": layout} if layout else {}
 
 
-def _strip(psi0, s0, layout):
-    """The strip of a grid point: the centred crease of fold angle `psi0` (rad), or with a
-    `layout` (crease positions, fractions of L) one crease of that angle at each."""
-    if not layout:
-        return Strip(psi0=psi0, s0=s0)
-    m = len(layout)
-    cr = Creases(np.asarray(layout, float), jnp.full((m,), psi0), jnp.full((m,), s0))
-    return Strip(psi0=math.pi, s0=s0, creases=cr)
-
-
 def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), contact=None, layout=()):
     """All gaps at one fold angle (rad), one gap after the other (`lax.scan`): the start
     states of each gap by Newton from the previous gap's (homotopy where that fails), then
@@ -141,7 +131,7 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), con
 
     def one(carry, g):
         t_prev, m_prev, ok_prev = carry
-        scene = par.set(float_scene(Scene(_strip(psi0, s0, layout), Clamps(g), mesh, contact=_contact(contact))), 0.0)
+        scene = par.set(float_scene(Scene(layout_strip(psi0, s0, layout), Clamps(g), mesh, contact=_contact(contact))), 0.0)
         # both start states through one traced body (`lax.map` over the side): one compiled
         # copy of the warm Newton and of the homotopy instead of two (XLA compile at -O0 25 s -> 20 s)
         is_sds = lambda x: isinstance(x, jax.ShapeDtypeStruct)  # noqa: E731

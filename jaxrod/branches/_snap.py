@@ -74,7 +74,12 @@ class SnapPath(eqx.Module):
 
     `alpha_c`, `theta_before`, `force_before` and `fold_height_before` are differentiable
     with respect to the float leaves of the scene (implicit differentiation of the
-    extended system; the discrete search itself carries no gradient)."""
+    extended system; the discrete search itself carries no gradient). At a branch point
+    (`kind` 2) the derivative is that of the mirror-symmetric family: it is taken through
+    the scene's mirror-symmetric part (`jaxrod.branches.mirror_symmetric_part`), so it is
+    exact along symmetric changes and zero along antisymmetric ones (one crease of a
+    symmetric pair moved alone counts half of each), where alpha_c itself has no
+    derivative."""
 
     snaps: Array
     alpha_c: Array

@@ -8,7 +8,8 @@ with `set_defaults`. Shared pieces: `jaxrod.cli._main.add_scene_args`, `make_sce
 `InputError` (one-line error, exit 2), `EXIT_OK`, `EXIT_USAGE`, `EXIT_NOT_CONVERGED`.
 
 `design` exit codes: 0 target reached, 3 not reached (the JSON, with `reached: false` and
-the best design found, is still printed), 2 bad input.
+the best design found, is still printed), 2 bad input. `--study two-creases` and `--study
+crease-position` run the crease design studies of `jaxrod.design`.
 """
 
 from __future__ import annotations
@@ -116,7 +117,95 @@ def _cmd_design_speed(args):
     return EXIT_OK if rec["result"] == "successful" else EXIT_NOT_CONVERGED
 
 
+def _check_crease_study(args):
+    """The options of `--study two-creases|crease-position`: InputError naming the first
+    one that does not fit."""
+    if args.target_speed is not None or args.target_hysteresis is not None:
+        raise InputError(f"study: {args.study} takes no --target-speed or --target-hysteresis")
+    if args.free_s0 or args.bounds or args.save:
+        raise InputError(f"study: {args.study} takes no --free-s0, --bounds or --save")
+    two = args.study == "two-creases"
+    if two:
+        if args.target_alpha_up is None or args.target_alpha_down is None:
+            raise InputError("study: two-creases needs --target-alpha-up and --target-alpha-down")
+        if args.psi0 is not None:
+            raise InputError("psi0: two-creases designs both fold angles; --psi0 is for crease-position")
+    elif args.target_alpha_up is not None or args.target_alpha_down is not None:
+        raise InputError("study: crease-position maximises the hysteresis width; it takes no angle targets")
+    for name in ("target_alpha_up", "target_alpha_down", "psi0", "gap", "s0", "tol"):
+        v = getattr(args, name)
+        if v is not None and not math.isfinite(v):
+            raise InputError(f"{name.replace('_', '-')}: must be a finite number, got {v}")
+    if args.gap is not None and not 0.0 < args.gap < 1.0:
+        raise InputError(f"gap: must lie in (0, 1), got {args.gap}")
+    if args.psi0 is not None and not 0.0 < args.psi0 < 180.0:
+        raise InputError(f"psi0: must lie in (0, 180) degrees for crease-position, got {args.psi0}")
+    if args.s0 != 0.02:
+        raise InputError("s0: the crease studies use creases of width 0.02 L")
+    if args.tol is not None and args.tol <= 0:
+        raise InputError(f"tol: must be > 0, got {args.tol}")
+    n = 48 if args.n is None else args.n
+    if n < 8 or n % 2:
+        raise InputError(f"n: must be an even integer >= 8, got {n}")
+    n_check = 2 * n if args.check_n is None else args.check_n
+    if n_check < 8 or n_check % 2 or n_check <= n:
+        raise InputError(f"check-n: must be an even integer > n = {n}, got {n_check}")
+    if args.starts is not None and args.starts != 1:
+        raise InputError(f"starts: the crease studies run from one start, got {args.starts}")
+    return n, n_check
+
+
+def _cmd_design_creases(args):
+    """`--study two-creases`: two creases with the target snap angles, then the fastest snap
+    up among them (`jaxrod.design.two_crease_study`); `--study crease-position`: the position of
+    one crease of angle --psi0 with the widest hysteresis (`crease_position_study`). Both are
+    re-checked at --check-n."""
+    n, n_check = _check_crease_study(args)
+    import jaxrod.design as ds
+
+    gap = 0.5 if args.gap is None else args.gap
+    quiet = args.json
+    try:
+        if args.study == "two-creases":
+            res = ds.two_crease_study(args.target_alpha_up, args.target_alpha_down, gap=gap, n=n, n_check=n_check,
+                                      tol_deg=0.02 if args.tol is None else args.tol, progress=not quiet)
+            ok = res.reached and res.check.result == "successful"
+        else:
+            res = ds.crease_position_study(120.0 if args.psi0 is None else args.psi0, gap, n=n, n_check=n_check,
+                                           progress=not quiet)
+            ok = res.check.result == "successful"
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    rec = res.to_dict()
+    rec.update(study=args.study, result="successful" if ok else
+               ("target_not_reached" if args.study == "two-creases" and not res.reached else res.check.result))
+    if args.json:
+        print(json.dumps(rec))
+    elif args.study == "two-creases":
+        print(f"design: creases at {', '.join(f'{c:.4f}' for c in res.positions)} L, fold angles "
+              f"{', '.join(f'{a:.3f}' for a in res.angles_deg)} deg (G/L = {gap:g}, n = {n})")
+        print(f"  alpha_c up {res.alpha_up_deg:+.4f}, down {res.alpha_down_deg:+.4f} deg "
+              f"(targets {res.targets_deg[0]:+g}, {res.targets_deg[1]:+g} +- {res.tol_deg:g})")
+        print(f"  v_s {res.v_s_start:.3f} -> {res.v_s:.3f} v*; snap clearance {res.snap_clearance:.4f} L")
+        print(f"  check at N = {res.check.n}: {res.check.alpha_up_deg:+.4f} / {res.check.alpha_down_deg:+.4f} deg, "
+              f"v_s {res.check.v_s:.3f} v*; {res.seconds:.1f} s; result {rec['result']}")
+    else:
+        print(f"design: widest hysteresis of one {res.psi0_deg:g} deg crease at G/L = {gap:g}: position "
+              f"{res.position:.4f} L, W = {res.width_deg:.3f} deg ({res.where}; centre {res.centre_width_deg:.3f})")
+        print(f"  best off-centre: {res.interior_position:.4f} L, W = {res.interior_width_deg:.3f} deg, "
+              f"smooth maximum: {res.interior_smooth}")
+        print(f"  check at N = {res.check.n}: W = {res.check.alpha_up_deg - res.check.alpha_down_deg:.3f} deg; "
+              f"{res.seconds:.1f} s; result {rec['result']}")
+    return EXIT_OK if ok else EXIT_NOT_CONVERGED
+
+
 def _cmd_design(args):
+    if args.study is not None:
+        return _cmd_design_creases(args)
+    if args.gap is not None:
+        raise InputError("gap: only used with --study (the angle design optimizes G/L; fix it with --bounds)")
+    if args.tol is None:
+        args.tol = 0.1
     if args.target_speed is not None:
         return _cmd_design_speed(args)
     if args.psi0 is not None:
@@ -212,12 +301,19 @@ def register(sub):
     p.add_argument("--target-speed", type=_number, default=None, metavar="V",
                    help="snapping speed v_s / v* of the snap up (designs the gap at --psi0)")
     p.add_argument("--psi0", type=_number, default=None, metavar="DEG",
-                   help="fold angle for --target-speed (default 90)")
+                   help="fold angle for --target-speed (default 90) and --study crease-position (default 120)")
+    p.add_argument("--study", choices=("two-creases", "crease-position"), default=None,
+                   help="two-creases: place and fold two creases for --target-alpha-up/-down, then maximise "
+                        "the snap-up speed; crease-position: the position of one --psi0 crease with the "
+                        "widest hysteresis (default mesh --n 48, checked at --check-n)")
+    p.add_argument("--gap", type=_number, default=None, metavar="G",
+                   help="G/L of the --study designs (default 0.5)")
     p.add_argument("--speed-tol", type=_number, default=0.01, metavar="FRAC",
                    help="relative tolerance of --target-speed (default %(default)g)")
     p.add_argument("--check-n", type=int, default=None, metavar="N",
                    help="mesh of the independent check of --target-speed (default 2 x --n)")
-    p.add_argument("--tol", type=_number, default=0.1, metavar="DEG", help="angle tolerance, deg (default %(default)g)")
+    p.add_argument("--tol", type=_number, default=None, metavar="DEG",
+                   help="angle tolerance, deg (default 0.1; 0.02 with --study two-creases)")
     p.add_argument("--bounds", default="", metavar="SPEC",
                    help="e.g. psi0=30:120,gap=0.3:0.95 (defaults psi0 10:180, gap 0.05:0.95, s0 0.005:0.1)")
     p.add_argument("--s0", type=_number, default=0.02, help="fold width (fixed unless --free-s0)")

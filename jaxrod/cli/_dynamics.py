@@ -76,6 +76,9 @@ def register(sub):
     q.add_argument("--gaps", default="0.3,0.4,0.5,0.6,0.7", help="comma-separated G/L")
     q.add_argument("--n", type=int, default=60, help="segments (default 60)")
     q.add_argument("--s0", type=float, default=0.02)
+    q.add_argument("--creases-at", default=None, metavar="LIST",
+                   help="crease positions in L (comma list): a crease of each fold angle of --psi0 at each, "
+                        "instead of the centred crease; the rows then carry each crease's v_s")
     _add_run_args(q)
     q.add_argument("--batch", choices=("points", "shard"), default="points",
                    help="points: one brink snap after the other, any --solver, DIR/speed_plane.csv (default); "
@@ -86,8 +89,6 @@ def register(sub):
 
 
 def _check_run_args(args):
-    import jaxrod as jr
-
     from ..dynamics import SOLVERS
 
     if args.solver not in SOLVERS:
@@ -241,9 +242,9 @@ def _cmd_snap(args):
 # One row per grid point. The settings a row was computed with are columns of the row
 # itself (`SETTINGS`): a rerun reuses exactly the rows of its own settings and computes the
 # rest, rows of other settings stay in the file untouched (and out of this run's fit).
-SETTINGS = ["n", "s0", "direction", "nudge", "solver", "rtol", "t1"]
+SETTINGS = ["n", "s0", "direction", "nudge", "solver", "rtol", "t1", "creases_at"]
 RESULT_FIELDS = ["snaps", "alpha_c_deg", "v_s", "t_snap", "kinetic_energy_peak", "bending_energy_before",
-                 "num_steps", "result"]
+                 "num_steps", "result", "v_s_creases"]
 FIELDS = ["psi0_deg", "gap", *SETTINGS, *RESULT_FIELDS]
 
 
@@ -264,9 +265,12 @@ def fit_plane(rows):
     return coef.tolist(), np.sqrt(np.diag(cov)).tolist(), float(np.sqrt(np.mean(res**2)))
 
 
-def _settings(args):
+def _settings(args, layout=()):
+    """A row's settings columns; the crease layout as `;`-separated positions ("" for the
+    centred crease)."""
     return dict(n=int(args.n), s0=float(args.s0), direction=args.direction, nudge=float(args.nudge),
-                solver=args.solver, rtol=float(args.rtol), t1=float(args.t1))
+                solver=args.solver, rtol=float(args.rtol), t1=float(args.t1),
+                creases_at=";".join(f"{c:.12g}" for c in layout))
 
 
 def _parse_row(r):
@@ -287,8 +291,8 @@ def _parse_row(r):
         raise ValueError("bad result code")
     row = dict(psi0_deg=float(r["psi0_deg"]), gap=float(r["gap"]), n=int(r["n"]), s0=float(r["s0"]),
                direction=r["direction"], nudge=float(r["nudge"]), solver=r["solver"], rtol=float(r["rtol"]),
-               t1=float(r["t1"]), snaps=r["snaps"] == "True", num_steps=num(r["num_steps"], int),
-               result=r["result"])
+               t1=float(r["t1"]), creases_at=r["creases_at"], snaps=r["snaps"] == "True",
+               num_steps=num(r["num_steps"], int), result=r["result"], v_s_creases=r["v_s_creases"] or None)
     row.update({k: num(r[k]) for k in RESULT_FIELDS if k not in row})
     return row
 
@@ -355,7 +359,11 @@ def _cmd_speed_plane(args):
         gaps = [float(x) for x in args.gaps.split(",")]
     except ValueError:
         raise InputError("psi0/gaps: comma-separated numbers expected") from None
+    from ._statics import _parse_list
+
     try:
+        layout = () if args.creases_at is None else jr.model.crease_layout(
+            _parse_list(args.creases_at, "creases-at"), psis, args.s0)
         for p in psis:
             for g in gaps:
                 jr.make_scene(p, g, 0, s0=args.s0, n=args.n)
@@ -365,9 +373,9 @@ def _cmd_speed_plane(args):
     except OSError as e:
         raise InputError(f"out: cannot create {args.out!r}: {e.strerror or e}") from None
     if args.batch == "shard":
-        return _speed_plane_sharded(args, psis, gaps)
+        return _speed_plane_sharded(args, psis, gaps, layout)
     path = os.path.join(args.out, "speed_plane.csv")
-    settings = _settings(args)
+    settings = _settings(args, layout)
     mine = lambda r: all(r[k] == v for k, v in settings.items())  # noqa: E731
     rows, dropped = _read_rows(path)
     done = {(r["psi0_deg"], r["gap"]) for r in rows if mine(r)}
@@ -382,7 +390,8 @@ def _cmd_speed_plane(args):
         _write_rows(path, rows)
     computed = []
     for p, g in tqdm(todo, desc="speed plane", unit="strip"):
-        scene = _array_leaves(jr.make_scene(p, g, 0, s0=args.s0, n=args.n))
+        scene = _array_leaves(jr.make_scene(p, g, 0, s0=args.s0, n=args.n) if not layout else
+                              jr.make_scene(180.0, g, 0, s0=args.s0, n=args.n, creases=[(c, p) for c in layout]))
         snap = jr.snap_angles(scene)
         path_ = snap.up if args.direction == "up" else snap.down
         row = dict(psi0_deg=p, gap=g, **settings, snaps=bool(path_.snaps),
@@ -391,6 +400,8 @@ def _cmd_speed_plane(args):
         if row["snaps"] and row["result"] == "successful":
             start, tr = jr.snap_dynamics(scene, args.direction, kind="brink", nudge=args.nudge, snap=snap,
                                          solver=args.solver, rtol=args.rtol, atol=args.rtol, t1=args.t1)
+            if layout:
+                row["v_s_creases"] = ";".join(f"{float(v):.10g}" for v in np.asarray(tr.v_s_creases))
             row.update(alpha_c_deg=float(np.degrees(start.alpha_c)), v_s=float(tr.v_s),
                        t_snap=float(tr.t_cross), kinetic_energy_peak=float(tr.kinetic_peak),
                        bending_energy_before=float(start.bending_before), num_steps=int(tr.num_steps))
@@ -405,7 +416,8 @@ def _cmd_speed_plane(args):
         if mine(r) and (r["psi0_deg"], r["gap"]) in wanted:
             first.setdefault((r["psi0_deg"], r["gap"]), r)
     rows = [first[pt] for pt in grid]
-    out = dict(points=len(rows), snapping=sum(bool(r["snaps"]) for r in rows), csv=path, computed_points=computed)
+    out = dict(points=len(rows), snapping=sum(bool(r["snaps"]) for r in rows), csv=path, computed_points=computed,
+               creases_at=list(layout) or None)
     return _report_plane(args, rows, out, "the CSV")
 
 
@@ -435,7 +447,7 @@ def _report_plane(args, rows, out, where):
     return EXIT_NOT_CONVERGED if flagged else EXIT_OK
 
 
-def _speed_plane_sharded(args, psis, gaps):
+def _speed_plane_sharded(args, psis, gaps, layout=()):
     """`jaxrod speed-plane --batch shard`: `jaxrod.speed_plane` across every device of every
     process (resumable from DIR/chunks), then the same fit, figure and JSON as the point-by-point run."""
     import jax
@@ -445,7 +457,7 @@ def _speed_plane_sharded(args, psis, gaps):
     if args.solver != "rattle":
         raise InputError(f"solver: --batch shard runs RATTLE (jaxrod.speed_plane); got --solver {args.solver}")
     ds = jr.speed_plane(psis, gaps, direction=args.direction, s0=args.s0, n=args.n, nudge=args.nudge, t1=args.t1,
-                        out=args.out, progress=jax.process_index() == 0)
+                        out=args.out, progress=jax.process_index() == 0, creases=layout or None)
     if jax.process_index() != 0:
         return EXIT_OK  # process 0 fits, draws and prints
     ok = int(jr.RESULTS.successful._value)
@@ -455,11 +467,15 @@ def _speed_plane_sharded(args, psis, gaps):
             code = int(ds["result"].values[i, j])
             name = _result_name(code)
             v = float(ds["v_s"].values[i, j])
-            rows.append(dict(psi0_deg=float(p), gap=float(g), v_s=v if math.isfinite(v) else None,
-                             snaps=code == ok, result=name))
+            row = dict(psi0_deg=float(p), gap=float(g), v_s=v if math.isfinite(v) else None,
+                       snaps=code == ok, result=name)
+            if layout:
+                row["v_s_creases"] = ";".join(f"{float(x):.10g}" for x in ds["v_s_creases"].values[i, j])
+            rows.append(row)
     out = dict(points=len(rows), snapping=sum(r["snaps"] for r in rows), netcdf=os.path.join(args.out,
                "speed_plane.nc"), computed_points=len(ds.attrs["computed_points"]),
-               devices=int(ds.attrs["device_count"]), processes=int(ds.attrs["process_count"]))
+               devices=int(ds.attrs["device_count"]), processes=int(ds.attrs["process_count"]),
+               creases_at=list(layout) or None)
     return _report_plane(args, rows, out, "the NetCDF file")
 
 

@@ -9,6 +9,7 @@ from ._scene import Clamps as Clamps
 from ._scene import Contact as Contact
 from ._scene import Creases as Creases
 from ._scene import crease_layout as crease_layout
+from ._scene import layout_strip as layout_strip
 from ._scene import parse_creases as parse_creases
 from ._scene import CONTACT_STIFFNESS as CONTACT_STIFFNESS
 from ._scene import CONTACT_THICKNESS as CONTACT_THICKNESS

@@ -62,19 +62,19 @@ class Creases(eqx.Module):
     widths: jnp.ndarray
 
     def __init__(self, positions, angles, widths=None, *, length=1.0):
-        pos = np.atleast_1d(positions) if is_concrete_pair(positions) else jnp.atleast_1d(positions)
-        ang = np.atleast_1d(angles) if is_concrete_pair(angles) else jnp.atleast_1d(angles)
         if widths is None:
             widths = 0.02 * length
-        wid = np.atleast_1d(widths) if is_concrete_pair(widths) else jnp.atleast_1d(widths)
-        for name, v in (("crease positions", pos), ("crease angles", ang), ("crease widths", wid)):
+        xp = lambda v: np if is_concrete_pair(v) else jnp  # noqa: E731  (NumPy until traced)
+        vecs = []
+        for name, v in (("crease positions", positions), ("crease angles", angles), ("crease widths", widths)):
+            v = xp(v).atleast_1d(v)
             if v.ndim != 1 or v.shape[0] < 1:
                 raise ValueError(f"{name} must be a non-empty 1-d sequence, got shape {tuple(v.shape)}")
+            vecs.append(v)
+        pos, ang, wid = vecs
         m = pos.shape[0]
-        if ang.shape[0] == 1 and m > 1:
-            ang = jnp.broadcast_to(ang, (m,)) if not isinstance(ang, np.ndarray) else np.broadcast_to(ang, (m,))
-        if wid.shape[0] == 1 and m > 1:
-            wid = jnp.broadcast_to(wid, (m,)) if not isinstance(wid, np.ndarray) else np.broadcast_to(wid, (m,))
+        # one angle or width for every crease
+        ang, wid = (xp(v).broadcast_to(v, (m,)) if v.shape[0] == 1 else v for v in (ang, wid))
         if ang.shape[0] != m or wid.shape[0] != m:
             raise ValueError(f"crease angles and widths must have one entry per crease position ({m}), "
                              f"got {ang.shape[0]} and {wid.shape[0]}")
@@ -105,6 +105,19 @@ class Creases(eqx.Module):
         s = jnp.asarray(s)
         prof = _crease_profile(s[..., None], self.positions, self.angles, self.widths)
         return jnp.sum(prof, axis=-1)
+
+    def mirrored(self, length=1.0) -> "Creases":
+        """The set's mirror image about $s = L/2$, crease by crease: crease k takes the
+        position $L - c_j$, angle and width of its partner j, the crease of the opposite rank
+        along the strip (the k-th from the left pairs with the k-th from the right). A
+        mirror-symmetric set is its own image; traced leaves are allowed (the partners come
+        from `argsort`, the values are differentiable)."""
+        pos = jnp.asarray(self.positions)
+        order = jnp.argsort(pos)
+        partner = order[::-1][jnp.argsort(order)]
+        return eqx.tree_at(lambda c: (c.positions, c.angles, c.widths), self,
+                           (length - pos[partner], jnp.asarray(self.angles)[partner],
+                            jnp.asarray(self.widths)[partner]))
 
     def is_mirror_symmetric(self, length=1.0, tol=1e-12) -> bool:
         """Whether the set equals its mirror image about $s = L/2$ (each crease has a partner
@@ -245,6 +258,13 @@ class Strip(eqx.Module):
             parts.append((c.positions, c.angles, c.widths))
         dtype = jnp.result_type(*(x for p in parts for x in p))
         return tuple(jnp.concatenate([jnp.asarray(p[i], dtype) for p in parts]) for i in range(3))
+
+    def mirrored(self) -> "Strip":
+        """The strip's mirror image about $s = L/2$ (the centred crease is its own image;
+        `Creases.mirrored` for the others)."""
+        if self.creases is None:
+            return self
+        return eqx.tree_at(lambda s: s.creases, self, self.creases.mirrored(self.length))
 
     def unfolded(self, u):
         r"""The strip with every fold deficit $\pi-\Psi$ scaled by `u` (0: flat, 1: itself);
@@ -571,6 +591,18 @@ def crease_layout(positions, psi0_deg, s0=0.02):
     for p in np.atleast_1d(np.asarray(psi0_deg, float)):
         Creases.from_degrees(layout, [float(p)] * len(layout), [float(s0)] * len(layout))
     return layout
+
+
+def layout_strip(psi0, s0, layout=()):
+    """The strip of a grid point (phase diagrams, speed planes): the centred crease of fold
+    angle `psi0` (rad; traced values allowed) and width `s0`, or with a `layout` (crease
+    positions, fractions of L, from [`jaxrod.model.crease_layout`][]) one crease of that
+    angle and width at each position and none at the centre."""
+    if not layout:
+        return Strip(psi0=psi0, s0=s0)
+    m = len(layout)
+    cr = Creases(np.asarray(layout, float), jnp.full((m,), psi0), jnp.full((m,), s0))
+    return Strip(psi0=math.pi, s0=s0, creases=cr)
 
 
 def make_scene(psi0_deg=60.0, gap=0.5, alpha_deg=0.0, *, alpha_right_deg=None, s0=0.02, n=100,
