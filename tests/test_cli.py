@@ -223,3 +223,21 @@ def test_help_and_version(capsys):
     text = capsys.readouterr().out
     for flag in ("--psi0", "--gap", "--alpha", "--alpha-right", "--state", "--s0", "--n", "--json", "--plot"):
         assert flag in text
+
+
+def test_unwritable_output_is_one_input_error(tmp_path):
+    """Every CLI output file (plots, animations, saved designs) is written inside `writing`:
+    an OSError becomes one InputError line naming the option and the path (exit 2)."""
+    from jaxrod.cli._main import InputError, writing
+
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    target = str(blocker / "shape.png")  # a path below a regular file
+    with pytest.raises(InputError, match=r"^plot: cannot write '.*shape\.png': Not a directory$"):
+        with writing("plot", target):
+            open(target, "w")
+    with pytest.raises(InputError, match=r"^animate: cannot write: "):
+        with writing("animate"):
+            raise PermissionError(13, "Permission denied")
+    with writing("plot", target):  # nothing raised: nothing reported
+        pass

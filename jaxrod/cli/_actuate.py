@@ -17,7 +17,8 @@ from __future__ import annotations
 import json
 import math
 
-from ._main import EXIT_NOT_CONVERGED, EXIT_OK, InputError, add_scene_args, creases_record, make_scene_from_args
+from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, add_scene_args, creases_record, make_scene_from_args,
+                    writing)
 
 DEFAULT_OBJECTS = {
     "balls": [
@@ -119,10 +120,8 @@ def _cmd_actuate(args):
     if args.animate:
         from ..plot import animate_actuation
 
-        try:
+        with writing("animate"):
             rec["animation"] = animate_actuation(act, args.animate)
-        except OSError as e:
-            raise InputError(f"animate: cannot write: {e.strerror or e}") from None
     if args.json:
         print(json.dumps(rec))
     else:

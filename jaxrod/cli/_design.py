@@ -19,17 +19,15 @@ import math
 import os
 
 from ..results import result_name
-from ._main import EXIT_NOT_CONVERGED, EXIT_OK, InputError
+from ._main import EXIT_NOT_CONVERGED, EXIT_OK, InputError, writing
 
 
 def _save(design, path, rec):
     """`--save PATH`: write PATH.eqx and PATH.json, record them in `rec` (InputError if not writable)."""
     if not path:
         return
-    try:
+    with writing("save", path):
         design.save(path)
-    except OSError as e:
-        raise InputError(f"save: cannot write {path!r}: {e.strerror or e}") from None
     rec["saved"] = [path + ".eqx", path + ".json"]
 
 

@@ -30,7 +30,7 @@ from ..dynamics import NUDGE
 from ..results import RESULTS
 from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _contact_record, _result_name,
                     add_contact_args, add_distributed_args, add_scene_args, clearance_separation, contact_mode,
-                    creases_record, make_scene_from_args, needs_contact)
+                    creases_record, make_scene_from_args, needs_contact, writing)
 
 PAPER_FIT = (42.59, 30.38, 5.00)
 
@@ -224,13 +224,11 @@ def _cmd_snap(args):
         tr = jr.simulate(start.scene, start.theta0, start.protocol, direction=start.direction, t1=tb,
                          stop_at_snap=args.scene != "asymmetric", solver=args.solver, rtol=args.rtol, atol=args.rtol,
                          frame_window=(ta, tb), n_frames=48)
-    try:
+    with writing("plot/animate"):
         if args.plot:
             rec["figures"] = plot_snap(tr, args.plot, title=f"Psi0 = {args.psi0:g} deg, G/L = {args.gap:g}")
         if args.animate:
             rec["animation"] = animate_snap(tr, args.animate)
-    except OSError as e:
-        raise InputError(f"plot/animate: cannot write: {e.strerror or e}") from None
     if args.json:
         print(json.dumps(rec))
     else:

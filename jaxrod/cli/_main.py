@@ -10,6 +10,7 @@ Exit codes: 0 success; 2 bad input (one line on stderr naming the parameter);
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import math
@@ -37,6 +38,17 @@ _COMMAND_MODULES = ("._critical", "._statics", "._dynamics", "._actuate", "._des
 
 class InputError(Exception):
     """Bad user input: reported as one line on stderr, exit code 2."""
+
+
+@contextlib.contextmanager
+def writing(option, path=None):
+    """Turn an `OSError` while writing an output file into one `InputError` line naming the
+    option (and the path, when given)."""
+    try:
+        yield
+    except OSError as e:
+        where = f" {path!r}" if path is not None else ""
+        raise InputError(f"{option}: cannot write{where}: {e.strerror or e}") from None
 
 
 class _Parser(argparse.ArgumentParser):
@@ -456,10 +468,8 @@ def _cmd_equilibrium(args):
     if contact_mode(args) == "auto" and needs_contact([rec["clearance"]], [rec["result_code"]]):
         eq, rec = solve(make_scene_from_args(args, contact=True))
     if args.plot:
-        try:
+        with writing("plot", args.plot):
             jr.plot_equilibria([eq], [args.state], args.plot)
-        except OSError as e:
-            raise InputError(f"plot: cannot write {args.plot!r}: {e.strerror or e}") from None
     if args.json:
         print(json.dumps(rec))
     else:

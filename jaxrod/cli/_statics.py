@@ -26,8 +26,8 @@ def _fin(x, deg=False):
 
 
 def _cmd_hysteresis(args):
-    from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _result_name, creases_record,
-                        make_scene_from_args)
+    from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, _array_leaves, _result_name, creases_record,
+                        make_scene_from_args, writing)
 
     scene = make_scene_from_args(args)
     import numpy as np
@@ -60,10 +60,8 @@ def _cmd_hysteresis(args):
     rec["branches"] = branches
     if args.plot:
         title = f"Ψ0 = {args.psi0:g}°, G/L = {args.gap:g}, s0/L = {args.s0:g}, n = {args.n}"
-        try:
+        with writing("plot", args.plot):
             jr.plot_hysteresis(h, args.plot, title=title)
-        except OSError as e:
-            raise InputError(f"plot: cannot write {args.plot!r}: {e.strerror or e}") from None
     bad = sorted({rec[f"{k}_{n}"] for k in ("start", "result") for n in ("up", "down")} - {"successful"})
     ok = not bad
     if args.json:
