@@ -6,6 +6,7 @@ marked slow (`pytest -m slow tests/test_design.py`)."""
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -241,6 +242,25 @@ def test_unreachable_snap_angle_gives_clear_message():
     assert "target not reached" in res.best.message and "alpha_c_up" in res.best.message
 
 
+def test_design_result_is_the_first_flagged_code_of_a_reached_design():
+    """`DesignResult.result` and its JSON: a reached design whose terms were computed on a
+    flagged path carries that path's code, not `successful` (the real design on a path
+    through itself is the nightly test below)."""
+    codes = jnp.asarray([int(jr.RESULTS.successful._value), int(jr.RESULTS.self_intersecting._value),
+                         int(jr.RESULTS.start_substituted._value)], jnp.int32)
+    one = jnp.ones(3)
+    d = ds.DesignResult(values=jnp.asarray([60.0, 0.1, 0.02]), achieved=one, targets=one, tols=one,
+                        reached=jnp.asarray(True), loss=jnp.asarray(0.0), num_iterations=jnp.asarray(1),
+                        status="converged", codes=codes, names=("alpha_c_up", "alpha_c_down", "hysteresis"))
+    assert d.result == jr.RESULTS.self_intersecting
+    assert d.to_dict()["result"] == "self_intersecting" and d.to_dict()["result_hysteresis"] == "start_substituted"
+    ok = eqx.tree_at(lambda r: r.codes, d, jnp.zeros_like(codes) + int(jr.RESULTS.successful._value))
+    assert ok.result == jr.RESULTS.successful
+    missed = eqx.tree_at(lambda r: r.reached, d, jnp.asarray(False))
+    assert missed.result == jr.RESULTS.target_not_reached
+
+
+@pytest.mark.slow  # 29 s on 2 cores; CI checks DesignResult.result on flagged codes above
 def test_design_carries_the_code_of_its_snap_path():
     """A target reached on a path that is not `successful` is not a success: at Psi0 = 60
     deg, G/L = 0.1 the snap-up path's critical state passes through itself

@@ -52,6 +52,7 @@ def test_fold_with_a_small_jump_is_a_snap(cusp_60):
     assert float(jnp.max(jnp.abs(eq.theta - p.theta_after))) < 1e-3
 
 
+@pytest.mark.slow  # 23 s on 2 cores; CI: the fold just below the cusp snaps (above) and the cusp ends the path in termination_gap (test_termination.py)
 def test_snapping_ends_at_the_cusp(cusp_60):
     """The down path snaps below the cusp and not far above it. Within ~1e-3 in G/L of the
     cusp the S the branch makes can be shorter than a continuation step: there a path that
