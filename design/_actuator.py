@@ -58,7 +58,6 @@ import functools
 import math
 import time
 
-import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp

@@ -23,6 +23,10 @@ Two studies, each re-checked by an independent forward solve at a finer mesh:
   golden-section search. At $c=L/2$ the up path of many strips snaps at a branch point that
   any off-centre crease turns into a fold (an imperfect bifurcation): $W$ has a cusp there,
   not a smooth maximum, and the study says which one it found.
+
+And one design of the gap: `crease_gap_for_speed`, the gap at which a given crease set snaps up
+at a target speed (Newton on $v_s(G)$ with the autodiff derivative through the RATTLE snap),
+re-checked at a finer mesh.
 """
 
 from __future__ import annotations
@@ -362,3 +366,98 @@ def crease_position_study(psi0_deg=120.0, gap=0.5, *, n=48, n_check=96, lo=0.1, 
                           float(pos), float(wbest), "centre" if centre_best else "interior", float(ci), float(wi),
                           slope, bool(math.isfinite(slope) and abs(slope) * xtol < 0.01), float(wc), check, check_i,
                           time.time() - t0)
+
+
+@dataclasses.dataclass
+class CreaseGapResult:
+    """`crease_gap_for_speed`'s design: the `gap` (G/L) at which the strip with `creases`
+    (`(position, psi0_deg, s0)` each) and centred crease `psi0_deg` snaps up at `v_s` (v*)
+    on the design mesh `n`, the Newton `history` of (gap, v_s), whether the target was
+    `reached` (within `tol`, relative), and the `check`: v_s of `jaxrod.snap_speed_run` on the
+    finer mesh `n_check` and its code; `confirmed` when the check is within `tol` too."""
+
+    target_speed: float
+    psi0_deg: float
+    creases: list
+    n: int
+    gap: float
+    v_s: float
+    history: list
+    reached: bool
+    tol: float
+    n_check: int
+    check_v_s: float
+    check_result: str
+    confirmed: bool
+    seconds: float
+
+    def to_dict(self):
+        return dataclasses.asdict(self)
+
+
+def crease_gap_for_speed(target_speed, creases, *, psi0_deg=180.0, s0=0.02, gap=0.5, bounds=(0.05, 0.95), n=48,
+                         n_check=96, tol=0.01, max_iter=12) -> CreaseGapResult:
+    r"""The gap $G/L$ at which a strip with the given creases (`[(position, psi0_deg[, s0])]`,
+    as `jaxrod.make_scene`; `psi0_deg` the centred crease, 180 for none) snaps up at
+    `target_speed` v*: Newton's method on $v_s(G)$ with $dv_s/dG$ by autodiff through
+    `jaxrod.snap_speed` (RATTLE), from `gap`, each step kept inside `bounds` (halved towards
+    the current gap when it leaves them) and, once gaps on both sides of the target are
+    known, inside that bracket (a bisection where the Newton step leaves it: the fixed-step
+    snap's v_s wiggles on small scales, so its derivative can mislead near the root), until $|v_s-v^\ast| \le 0.1\,$`tol`$\,v^\ast$ or
+    `max_iter` steps; then re-checked by `jaxrod.snap_speed_run` on `n_check` segments.
+    Needs float64."""
+    import time
+
+    if not jax.config.jax_enable_x64:
+        raise ValueError("crease_gap_for_speed needs float64; enable it with jax.config.update('jax_enable_x64', True)")
+    if not (math.isfinite(float(target_speed)) and target_speed > 0):
+        raise ValueError(f"target_speed must be a finite number > 0, got {target_speed!r}")
+    lo, hi = (float(b) for b in bounds)
+    if not 0.0 < lo < hi < 1.0:
+        raise ValueError(f"bounds must satisfy 0 < lower < upper < 1, got {bounds!r}")
+    if not lo < gap < hi:
+        raise ValueError(f"gap must lie inside the bounds {bounds!r}, got {gap!r}")
+    t0 = time.perf_counter()
+    template = jr.make_scene(psi0_deg, gap, s0=s0, n=n, creases=creases)  # validates the creases
+    record = [[float(v) for v in row] for row in zip(*(np.asarray(x) for x in template.strip.crease_list()))]
+
+    def speed(g):
+        return jr.snap_speed(eqx.tree_at(lambda s: s.clamps.gap, template, g))
+
+    vg = jax.jit(jax.value_and_grad(speed))
+    g = jnp.asarray(float(gap))
+    history, reached = [], False
+    for _ in range(max_iter + 1):
+        v, dv = vg(g)
+        v, dv = float(v), float(dv)
+        history.append((float(g), v))
+        if not math.isfinite(v):
+            break
+        if abs(v - target_speed) <= 0.1 * tol * target_speed:
+            reached = True
+            break
+        if len(history) > max_iter:
+            break
+        # the bracket: the closest gaps on either side of the target seen so far
+        above = [h[0] for h in history if math.isfinite(h[1]) and h[1] > target_speed]
+        below = [h[0] for h in history if math.isfinite(h[1]) and h[1] < target_speed]
+        new = float(g) - (v - target_speed) / dv if math.isfinite(dv) and dv != 0.0 else math.nan
+        if above and below:
+            a_, b_ = sorted((min(above, key=lambda x: abs(x - float(g))), min(below, key=lambda x: abs(x - float(g)))))
+            if not a_ < new < b_:
+                new = 0.5 * (a_ + b_)  # a Newton step that leaves the bracket: bisect
+        elif not math.isfinite(new):
+            break
+        step = new - float(g)
+        while not lo < float(g) + step < hi:
+            step *= 0.5
+        g = jnp.asarray(float(g) + step)
+    best_g, best_v = min((h for h in history if math.isfinite(h[1])), key=lambda h: abs(h[1] - target_speed),
+                         default=(float(gap), math.nan))
+    reached = reached or (math.isfinite(best_v) and abs(best_v - target_speed) <= tol * target_speed)
+    run = jr.snap_speed_run(jr.make_scene(psi0_deg, best_g, s0=s0, n=n_check, creases=creases))
+    cv, code = float(run.v_s), jr.result_name(run.result)
+    confirmed = bool(reached and code == "successful" and abs(cv - target_speed) <= tol * target_speed)
+    return CreaseGapResult(float(target_speed), float(psi0_deg), record, int(n), float(best_g), float(best_v),
+                           [list(h) for h in history], bool(reached), float(tol), int(n_check), cv, code, confirmed,
+                           time.perf_counter() - t0)

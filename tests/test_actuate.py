@@ -303,3 +303,129 @@ def test_traced_contact_law_is_refused_with_a_clear_message(scene, down):
 
     with pytest.raises(ValueError, match="bodies: stiffness, thickness, radius and mass"):
         jax.jit(f)(1e5)
+
+
+# ----- the paper's Fig. 4 sequence --------------------------------------------------------
+
+def test_sequence_windows_follow_the_program():
+    """Each program's window starts where its clamps leave 0 and ends after its reset and
+    rest (the last after its hold), as `sequence_program` lays the knots."""
+    from jaxrod import design
+
+    peaks = [(40.0, -50.0), (-30.0, 60.0), (120.0, 120.0)]
+    prog = design.sequence_program(peaks)
+    wins = design.sequence_windows(3)
+    assert wins == [(0.0, 4.8), (4.8, 9.6), (9.6, 11.4)]
+    assert float(prog.times[-1]) == pytest.approx(11.4)
+    for (a, b), (pl, pr) in zip(wins, peaks):
+        aL, aR, _, _ = prog.angles(jnp.asarray(a))
+        assert float(aL) == float(aR) == 0.0
+        aL, aR, _, _ = prog.angles(jnp.asarray(a + 1.0))  # the end of the ramp
+        assert math.degrees(float(aL)) == pytest.approx(pl) and math.degrees(float(aR)) == pytest.approx(pr)
+    aL, _, _, _ = prog.angles(jnp.asarray(4.8 - 1.0 - 1.0))  # the reset's bottom
+    assert math.degrees(float(aL)) == pytest.approx(-110.0)
+
+
+def _fake_run(names, t, speeds, final_positions, final_speed=0.0):
+    """A run's ball samples (host arrays): speeds (n, M) along x."""
+    import types
+
+    v = np.zeros(speeds.shape + (2,))
+    v[..., 0] = speeds
+    v[-1, :, 0] = final_speed
+    pos = np.zeros_like(v)
+    pos[-1] = final_positions
+    return types.SimpleNamespace(names=tuple(names), t=np.asarray(t), ball_velocity=v, ball_position=pos)
+
+
+def test_remaining_balls_and_per_program_speeds():
+    from jaxrod import design
+
+    b = design.fig4_bodies()
+    run = _fake_run(b.names, np.linspace(0, 1, 5), np.zeros((5, 3)), [[0.0, 0.2], [0.3, 0.5], [9.0, 0.1]])
+    left = design.remaining_bodies(b, run, ["right"])
+    assert left.names == ("left", "centre")
+    np.testing.assert_allclose(np.asarray(left.position), [[0.0, 0.2], [0.3, 0.5]])
+    np.testing.assert_allclose(np.asarray(left.velocity), 0.0)
+    assert float(left.table.deceleration) == 5.0 and float(left.thickness) == float(b.thickness)
+    assert design.remaining_bodies(b, run, ["left", "centre", "right"]) is None
+    with pytest.raises(ValueError, match="ball 'left' still moves"):
+        design.remaining_bodies(b, _fake_run(b.names, [0, 1], np.zeros((2, 3)), np.zeros((3, 2)), 0.1), ["right"])
+    # per program: peak speeds in its window, for the balls still on the table
+    t = np.array([0.5, 2.0, 5.0, 7.0, 10.0, 11.0, np.nan])
+    sp = np.array([[0.1, 0.0, 7.0], [0.7, 0.2, 5.0], [0.3, 0.0, 1.0], [6.0, 0.5, 0.0], [0.0, 5.5, 0.0],
+                   [0.0, 4.0, 0.0], [99.0, 99.0, 99.0]])
+    out = design.sequence_speeds(_fake_run(b.names, t, sp, np.zeros((3, 2))), ["right", "left", "centre"])
+    assert out == [{"left": 0.7, "centre": 0.2, "right": 7.0}, {"left": 6.0, "centre": 0.5}, {"centre": 5.5}]
+
+
+def test_cli_paper_fig4_reports_each_program(monkeypatch, capsys):
+    """`jaxrod actuate --program paper-fig4`: the designed peaks in sequence on the three balls;
+    per program the balls it launched and whether it spared the others (a stand-in run: the
+    real one is the nightly test below); exit 3 when a program launches the wrong ball."""
+    import types
+
+    from jaxrod import design
+    from jaxrod.cli._main import main
+
+    seen = {}
+    t = np.array([1.0, 2.0, 6.0, 10.0, 13.0])  # the last sample: every ball at rest
+
+    def fake(speeds):
+        def actuate(scene, bodies, program, **kw):
+            seen.update(program=program, names=bodies.names, t1=kw.get("t1"), n=scene.mesh.n)
+            run = _fake_run(bodies.names, t, np.asarray(speeds, float), np.zeros((3, 2)))
+            return types.SimpleNamespace(
+                **vars(run), result=jr.RESULTS.successful, hits=lambda: [], snaps=lambda: [],
+                energy_error=np.float64(1e-4), hit=np.ones(3, bool), launch_speed=np.ones(3), peak_speed=np.ones(3),
+                min_clearance=np.zeros(3), num_steps=np.int64(10))
+        return actuate
+
+    good = [[0.3, 0.2, 7.0], [0.5, 0.1, 0.0], [6.0, 0.4, 0.0], [0.0, 5.6, 0.0], [0.0, 0.0, 0.0]]
+    monkeypatch.setattr(jr, "actuate", fake(good))
+    assert main(["actuate", "--program", "paper-fig4", "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert seen["names"] == ("left", "centre", "right") and seen["n"] == 24 and seen["t1"] == pytest.approx(13.4)
+    want = design.sequence_program(design.FIG4_PEAKS)
+    np.testing.assert_allclose(np.asarray(seen["program"].alpha_left), np.asarray(want.alpha_left))
+    assert [q["launched"] for q in rec["programs"]] == [["right"], ["left"], ["centre"]]
+    assert [q["target"] for q in rec["programs"]] == ["right", "left", "centre"]
+    assert rec["programs"][1]["peak_speeds"] == {"left": 6.0, "centre": 0.4}
+    assert rec["sequence_confirmed"] is True and rec["result"] == "successful"
+    bad = [[0.3, 2.0, 7.0], [0.5, 0.1, 0.0], [6.0, 0.4, 0.0], [0.0, 5.6, 0.0], [0.0, 0.0, 0.0]]  # A knocks the centre ball too
+    monkeypatch.setattr(jr, "actuate", fake(bad))
+    assert main(["actuate", "--program", "paper-fig4"]) == 3
+    out = capsys.readouterr().out
+    assert "program A (right): launched right" in out and "sequence_confirmed False" in out
+
+
+@pytest.mark.slow  # the sequence at N = 24 (about 40 s on 2 cores)
+def test_cli_paper_fig4_sequence(capsys):
+    """The three designed programs in one run on the finer mesh: A launches the right ball
+    and B the left one, each leaving the balls still on the table below 1.2 v*; C's program
+    (not found by the design, `fig4_study`) is reported as not as designed: exit 3."""
+    from jaxrod.cli._main import main
+
+    assert main(["actuate", "--program", "paper-fig4", "--json"]) == 3
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["result"] == "successful" and rec["sequence_confirmed"] is False
+    assert [q["as_designed"] for q in rec["programs"]] == [True, True, False]
+    assert [q["launched"] for q in rec["programs"][:2]] == [["right"], ["left"]]
+    assert rec["energy_error"] < 1e-3
+
+
+@pytest.mark.slow  # the whole study (several minutes on 2 cores)
+def test_fig4_study_designs_the_sequence_it_ships():
+    """`fig4_study` designs A, B, C one after the other, each on the balls the ones before it
+    left; re-checked together on the finer mesh, A and B each launch their own ball and spare
+    the others, C is not found; the peaks are those `FIG4_PEAKS` ships to the CLI."""
+    from jaxrod import design
+
+    r = design.fig4_study()
+    assert [d.target for d in r.designs] == ["right", "left", "centre"]
+    np.testing.assert_allclose([d.peaks_deg for d in r.designs], design.FIG4_PEAKS, atol=1e-6)
+    assert [list(s) for s in r.stage_speeds] == [["left", "centre", "right"], ["left", "centre"], ["centre"]]
+    for d, sp in zip(r.designs[:2], r.stage_speeds[:2]):  # A and B hold in the sequence run
+        assert d.reached and d.confirmed
+        assert sp[d.target] >= 5.0 and all(v <= 1.2 for nm, v in sp.items() if nm != d.target), sp
+    assert not r.designs[2].reached and not r.confirmed  # C: see fig4_study

@@ -193,3 +193,58 @@ def test_cli_crease_position_study(capsys):
     rec = json.loads(capsys.readouterr().out)
     assert rec["where"] == "centre" and rec["position"] == 0.5 and rec["result"] == "successful"
     assert abs(rec["width_deg"] - 161.54) < 0.01 and rec["check"]["n"] == 96
+
+
+def test_cli_gap_for_a_crease_set(monkeypatch, capsys):
+    """`jaxrod design --target-speed V --crease C:PSI0 ...`: the gap of that strip (a stand-in
+    for `crease_gap_for_speed`, whose real run is the nightly test below); bad input exits 2."""
+    import json
+
+    from jaxrod.cli._main import main
+
+    calls = []
+
+    def fake(v, creases, **kw):
+        calls.append((v, creases, kw))
+        return jd.CreaseGapResult(v, kw["psi0_deg"], [[c, math.radians(p), 0.02] for c, p in creases], kw["n"],
+                                  0.61, v * 1.001, [[0.5, 20.0], [0.61, v * 1.001]], True, kw["tol"], kw["n_check"],
+                                  v * 1.004, "successful", True, 1.0)
+
+    monkeypatch.setattr(jd, "crease_gap_for_speed", fake)
+    argv = ["design", "--target-speed", "25", "--crease", "0.3:90", "--crease", "0.7:90"]
+    assert main(argv + ["--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert calls[-1] == (25.0, [(0.3, 90.0), (0.7, 90.0)], dict(psi0_deg=180.0, s0=0.02, gap=0.5, bounds=(0.05, 0.95),
+                                                               n=48, n_check=96, tol=0.01, max_iter=30))
+    assert rec["gap"] == 0.61 and rec["result"] == "successful" and rec["check_result"] == "successful"
+    assert main(argv + ["--bounds", "gap=0.4:0.9", "--gap", "0.6", "--n", "24"]) == 0
+    assert calls[-1][2]["bounds"] == (0.4, 0.9) and calls[-1][2]["gap"] == 0.6 and calls[-1][2]["n_check"] == 48
+    assert "G/L = 0.61000" in capsys.readouterr().out
+    for extra, match in ((["--free-s0"], "gap only"), (["--starts", "3"], "starts"), (["--bounds", "s0=0.01:0.03"],
+                         "gap only"), (["--speed-tol", "2"], "speed-tol"), (["--psi0", "0"], "psi0")):
+        n_calls = len(calls)
+        assert main(argv + extra) == 2 and len(calls) == n_calls, extra
+        assert match in capsys.readouterr().err
+    assert main(["design", "--target-alpha-up", "50", "--crease", "0.3:90"]) == 2
+    assert "crease: only used with --target-speed" in capsys.readouterr().err
+
+
+def test_gap_for_speed_bad_input():
+    with pytest.raises(ValueError, match="target_speed"):
+        jd.crease_gap_for_speed(-1.0, [(0.3, 90.0)])
+    with pytest.raises(ValueError, match="bounds"):
+        jd.crease_gap_for_speed(20.0, [(0.3, 90.0)], bounds=(0.5, 0.4))
+    with pytest.raises(ValueError, match="gap must lie inside"):
+        jd.crease_gap_for_speed(20.0, [(0.3, 90.0)], gap=0.99)
+    with pytest.raises(ValueError, match="crease 1 position"):
+        jd.crease_gap_for_speed(20.0, [(0.3, 90.0), (1.3, 90.0)])
+
+
+@pytest.mark.slow  # Newton through the RATTLE snap of a two-crease strip, then the check (~2 min on 2 cores)
+def test_gap_for_speed_of_a_crease_set():
+    """Two creases of 90 deg at 0.3 L and 0.65 L: the gap whose snap up runs at 12 v*, by
+    Newton on v_s(G) with the autodiff derivative; confirmed at N = 96 within 1 %."""
+    r = jd.crease_gap_for_speed(12.0, [(0.3, 90.0), (0.65, 90.0)], n=48, n_check=96)
+    assert r.reached and r.confirmed, r
+    assert abs(r.v_s - 12.0) <= 0.002 * 12.0 and abs(r.check_v_s - 12.0) <= 0.01 * 12.0
+    assert 0.05 < r.gap < 0.95 and len(r.history) <= 10

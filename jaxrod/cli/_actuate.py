@@ -2,7 +2,12 @@
 
 `--program FILE.json` holds the knots, `{"times": [...], "alpha_left_deg": [...],
 "alpha_right_deg": [...]}` (`jaxrod.Program.to_json`), optionally with `"t1"` and `"state"`
-("down" or "up", the start state at the first knot). `--objects FILE.json` holds the balls
+("down" or "up", the start state at the first knot). `--program paper-fig4` runs the paper's
+Fig. 4 sequence: the three programs of `jaxrod.design.FIG4_PEAKS` one after the other
+(`jaxrod.design.sequence_program`, the strip reset down between them) on the three balls,
+and reports per program (`programs`) the peak speed of each ball still on the table, which
+ball it launched (faster than `FIG4_V_LAUNCH`) and whether it spared the others (slower than
+`FIG4_V_SPARE`); exit 3 unless every program launched its own ball and only it. `--objects FILE.json` holds the balls
 and the contact law, `{"balls": [{"name", "x", "y", "radius", "mass"}, ...], "stiffness",
 "thickness", "table": {"deceleration"} | "floor": {"height"}}` (only `balls` required);
 without it the three balls of `DEFAULT_OBJECTS` (those of `jaxrod.design.fig4_bodies`) lie on
@@ -23,7 +28,7 @@ from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, add_scene_args, cre
 DEFAULT_OBJECTS = {
     "balls": [
         {"name": "left", "x": 0.05, "y": 0.10, "radius": 0.04, "mass": 0.05},
-        {"name": "centre", "x": 0.25, "y": 0.47, "radius": 0.04, "mass": 0.05},
+        {"name": "centre", "x": 0.25, "y": 0.48, "radius": 0.04, "mass": 0.05},
         {"name": "right", "x": 0.45, "y": 0.10, "radius": 0.04, "mass": 0.05},
     ],
     "table": {"deceleration": 5.0},
@@ -34,8 +39,9 @@ def register(sub):
     p = sub.add_parser("actuate", help="run a clamp program on the strip with balls it strikes: hits, snaps, energy")
     add_scene_args(p)
     p.set_defaults(n=24)
-    p.add_argument("--program", metavar="FILE.json", required=True,
-                   help='knots {"times": [...], "alpha_left_deg": [...], "alpha_right_deg": [...]} (T, degrees)')
+    p.add_argument("--program", metavar="FILE.json|paper-fig4", required=True,
+                   help='knots {"times": [...], "alpha_left_deg": [...], "alpha_right_deg": [...]} (T, degrees), '
+                        "or paper-fig4: the paper's three programs in sequence (jaxrod.design.FIG4_PEAKS)"),
     p.add_argument("--objects", metavar="FILE.json", default=None,
                    help='balls {"balls": [{"name", "x", "y", "radius", "mass"}], "stiffness", "thickness", '
                         '"table": {"deceleration"} or "floor": {"height"}} (default: three balls on a table)')
@@ -89,9 +95,17 @@ def _cmd_actuate(args):
 
     import jaxrod as jr
 
-    raw = _read_json(args.program, "program")
+    fig4 = args.program == "paper-fig4"
+    if fig4:
+        import jaxrod.design as ds
+
+        program = ds.sequence_program(ds.FIG4_PEAKS)
+        raw = {"t1": float(program.times[-1]) + 2.0}
+    else:
+        raw = _read_json(args.program, "program")
     try:
-        program = jr.Program.from_json(raw)
+        if not fig4:
+            program = jr.Program.from_json(raw)
         bodies = bodies_from_json(_read_json(args.objects, "objects") if args.objects else DEFAULT_OBJECTS)
     except (ValueError, TypeError) as e:
         raise InputError(str(e)) from None
@@ -117,6 +131,11 @@ def _cmd_actuate(args):
         state=state,
         dissipation="none" if args.undamped else dict(damping=jr.ACTUATOR_DAMPING, viscosity=jr.ACTUATOR_VISCOSITY),
     )
+    ok = res == "successful"
+    if fig4:
+        rec["programs"], confirmed = _fig4_programs(act)
+        rec["sequence_confirmed"] = confirmed
+        ok = ok and confirmed
     if args.animate:
         from ..plot import animate_actuation
 
@@ -130,5 +149,29 @@ def _cmd_actuate(args):
                   f"launch {h['launch_speed']:.3f} v*")
         for s in rec["snaps"]:
             print(f"{s['kind']:5s} t = {s['time']:.4f} T  {s['from']} -> {s['to']}  fold {s['fold']}")
-        print(f"energy_error {rec['energy_error']:.2e}  result {res}")
-    return EXIT_OK if res == "successful" else EXIT_NOT_CONVERGED
+        for q in rec.get("programs", []):
+            print(f"program {q['program']} ({q['target']}): launched {', '.join(q['launched']) or 'nothing'}; "
+                  + ", ".join(f"{k} {v:.2f}" for k, v in q["peak_speeds"].items()) + " v*")
+        print(f"energy_error {rec['energy_error']:.2e}  result {res}"
+              + (f"  sequence_confirmed {rec['sequence_confirmed']}" if fig4 else ""))
+    return EXIT_OK if ok else EXIT_NOT_CONVERGED
+
+
+def _fig4_programs(act):
+    """Per program of the paper's Fig. 4 sequence: its target, peaks, time window, the peak
+    speed of each ball still on the table, the balls it launched and whether it launched its
+    own ball and spared the others; and whether all three did."""
+    import jaxrod.design as ds
+
+    targets = list(ds.FIG4_PROGRAMS)
+    timing = {k: v for k, v in ds.SEQUENCE_TIMING.items() if k != "reset"}
+    out, confirmed = [], True
+    for k, (sp, win) in enumerate(zip(ds.sequence_speeds(act, targets),
+                                      ds.sequence_windows(len(targets), **timing))):
+        launched = [nm for nm, v in sp.items() if v >= ds.FIG4_V_LAUNCH]
+        spared = all(v <= ds.FIG4_V_SPARE for nm, v in sp.items() if nm != targets[k])
+        good = launched == [targets[k]] and spared
+        confirmed = confirmed and good
+        out.append(dict(program="ABC"[k], target=targets[k], peaks_deg=list(ds.FIG4_PEAKS[k]), window=list(win),
+                        peak_speeds=sp, launched=launched, spared_others=spared, as_designed=good))
+    return out, confirmed

@@ -63,6 +63,8 @@ def _cmd_design_speed(args):
     v = args.target_speed
     if not math.isfinite(v) or v <= 0:
         raise InputError(f"target-speed: must be a finite number > 0 (v_s / v*), got {v}")
+    if args.design_creases:
+        return _cmd_design_crease_gap(args)
     psi0 = 90.0 if args.psi0 is None else args.psi0
     if not math.isfinite(psi0) or not 0 < psi0 <= 180:
         raise InputError(f"psi0: must be in (0, 180] degrees, got {psi0}")
@@ -112,6 +114,51 @@ def _cmd_design_speed(args):
         print(f"  check at N = {chk.n} ({chk.solver}, rtol {chk.rtol:g}): v_s = {chk.v_s:.4f} v*, "
               f"error {100 * chk.error:.3f} %")
         print(f"  {res.message}; {res.wall_time:.1f} s; result {rec['result']}")
+    return EXIT_OK if rec["result"] == "successful" else EXIT_NOT_CONVERGED
+
+
+def _cmd_design_crease_gap(args):
+    """`--target-speed V --crease ...`: the gap at which the strip with those creases snaps up
+    at V (`jaxrod.design.crease_gap_for_speed`), re-checked at --check-n."""
+    if args.free_s0 or args.save:
+        raise InputError("crease: --target-speed with --crease designs the gap only (no --free-s0 or --save)")
+    if args.starts is not None and args.starts != 1:
+        raise InputError(f"starts: --target-speed with --crease runs from one start, got {args.starts}")
+    psi0 = 180.0 if args.psi0 is None else args.psi0
+    if not math.isfinite(psi0) or not 0 < psi0 <= 180:
+        raise InputError(f"psi0: must be in (0, 180] degrees, got {psi0}")
+    tol = args.speed_tol
+    if not math.isfinite(tol) or not 0 < tol < 1:
+        raise InputError(f"speed-tol: must be a relative tolerance in (0, 1), got {tol}")
+    n = 48 if args.n is None else args.n
+    if n < 8 or n % 2:
+        raise InputError(f"n: must be an even integer >= 8, got {n}")
+    n_check = 2 * n if args.check_n is None else args.check_n
+    if n_check < 8 or n_check % 2 or n_check <= n:
+        raise InputError(f"check-n: must be an even integer > n = {n}, got {n_check}")
+    bounds = _bounds(args.bounds)
+    if set(bounds) - {"gap"}:
+        raise InputError("bounds: --target-speed with --crease designs the gap only (gap=LO:HI)")
+    lo, hi = bounds.get("gap", (0.05, 0.95))
+    gap = 0.5 if args.gap is None else args.gap
+    import jaxrod.design as ds
+
+    try:
+        res = ds.crease_gap_for_speed(args.target_speed, args.design_creases, psi0_deg=psi0, s0=args.s0, gap=gap,
+                                      bounds=(lo, hi), n=n, n_check=n_check, tol=tol, max_iter=args.max_iter)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    rec = res.to_dict()
+    rec["result"] = ("successful" if res.confirmed else "target_not_reached" if not res.reached
+                     else res.check_result if res.check_result != "successful" else "check_failed")
+    if args.json:
+        print(json.dumps(rec))
+    else:
+        print(f"design: G/L = {res.gap:.5f} for the creases {rec['creases']} (n = {n})")
+        print(f"  snap_speed {res.v_s:.4f} v* (target {res.target_speed:g} +- {100 * tol:g} %), "
+              f"{len(res.history)} Newton evaluations")
+        print(f"  check at N = {res.n_check}: v_s = {res.check_v_s:.4f} v* ({res.check_result}); "
+              f"{res.seconds:.1f} s; result {rec['result']}")
     return EXIT_OK if rec["result"] == "successful" else EXIT_NOT_CONVERGED
 
 
@@ -198,10 +245,15 @@ def _cmd_design_creases(args):
 
 
 def _cmd_design(args):
+    if args.design_creases and (args.study is not None or args.target_speed is None):
+        raise InputError("crease: only used with --target-speed (the gap of a strip with those creases)")
     if args.study is not None:
         return _cmd_design_creases(args)
-    if args.gap is not None:
-        raise InputError("gap: only used with --study (the angle design optimizes G/L; fix it with --bounds)")
+    if args.gap is not None and not args.design_creases:
+        raise InputError("gap: only used with --study or --crease (the angle design optimizes G/L; fix it with "
+                         "--bounds)")
+    if args.gap is not None and not (math.isfinite(args.gap) and 0.0 < args.gap < 1.0):
+        raise InputError(f"gap: must lie in (0, 1), got {args.gap}")
     if args.tol is None:
         args.tol = 0.1
     if args.target_speed is not None:
@@ -279,7 +331,7 @@ def register(sub):
     """Add `design` and `reproduce` to the `jaxrod` argument parser."""
     import argparse
 
-    from ._main import _EPILOG, _number
+    from ._main import _EPILOG, _crease, _number
 
     p = sub.add_parser("design", help="find (Psi0, G/L) with given snap angles, or the gap with a snap speed",
                        description="Inverse design: multi-start Levenberg-Marquardt on (Psi0, G/L) [and s0]\n"
@@ -299,7 +351,12 @@ def register(sub):
     p.add_argument("--target-speed", type=_number, default=None, metavar="V",
                    help="snapping speed v_s / v* of the snap up (designs the gap at --psi0)")
     p.add_argument("--psi0", type=_number, default=None, metavar="DEG",
-                   help="fold angle for --target-speed (default 90) and --study crease-position (default 120)")
+                   help="fold angle for --target-speed (default 90, or 180 with --crease: the centred crease) "
+                        "and --study crease-position (default 120)")
+    p.add_argument("--crease", dest="design_creases", type=_crease, action="append", default=None,
+                   metavar="C:PSI0[:S0]",
+                   help="with --target-speed: a crease at C (in L) of fold angle PSI0 (deg), repeatable; the gap "
+                        "of that strip is designed (jaxrod.design.crease_gap_for_speed)")
     p.add_argument("--study", choices=("two-creases", "crease-position"), default=None,
                    help="two-creases: place and fold two creases for --target-alpha-up/-down, then maximise "
                         "the snap-up speed; crease-position: the position of one --psi0 crease with the "
