@@ -54,6 +54,28 @@ def _finite_or_none(x):
     return x if math.isfinite(x) else None
 
 
+def _meshes(args):
+    """The design mesh `--n` (default 48) and the check's `--check-n` (default 2n), checked."""
+    n = 48 if args.n is None else args.n
+    if n < 8 or n % 2:
+        raise InputError(f"n: must be an even integer >= 8, got {n}")
+    n_check = 2 * n if args.check_n is None else args.check_n
+    if n_check < 8 or n_check % 2 or n_check <= n:
+        raise InputError(f"check-n: must be an even integer > n = {n}, got {n_check}")
+    return n, n_check
+
+
+def _speed_psi0_and_tol(args, default_psi0):
+    """`--psi0` (default `default_psi0`) and `--speed-tol` of a snap-speed design, checked."""
+    psi0 = default_psi0 if args.psi0 is None else args.psi0
+    if not math.isfinite(psi0) or not 0 < psi0 <= 180:
+        raise InputError(f"psi0: must be in (0, 180] degrees, got {psi0}")
+    tol = args.speed_tol
+    if not math.isfinite(tol) or not 0 < tol < 1:
+        raise InputError(f"speed-tol: must be a relative tolerance in (0, 1), got {tol}")
+    return psi0, tol
+
+
 def _cmd_design_speed(args):
     """`--target-speed`: study (c), the gap (and s0 with --free-s0) with v_s = target at --psi0."""
     angle_targets = (args.target_alpha_up, args.target_alpha_down, args.target_hysteresis)
@@ -65,18 +87,8 @@ def _cmd_design_speed(args):
         raise InputError(f"target-speed: must be a finite number > 0 (v_s / v*), got {v}")
     if args.design_creases:
         return _cmd_design_crease_gap(args)
-    psi0 = 90.0 if args.psi0 is None else args.psi0
-    if not math.isfinite(psi0) or not 0 < psi0 <= 180:
-        raise InputError(f"psi0: must be in (0, 180] degrees, got {psi0}")
-    tol = args.speed_tol
-    if not math.isfinite(tol) or not 0 < tol < 1:
-        raise InputError(f"speed-tol: must be a relative tolerance in (0, 1), got {tol}")
-    n = 48 if args.n is None else args.n
-    if n < 8 or n % 2:
-        raise InputError(f"n: must be an even integer >= 8, got {n}")
-    n_check = 2 * n if args.check_n is None else args.check_n
-    if n_check < 8 or n_check % 2 or n_check <= n:
-        raise InputError(f"check-n: must be an even integer > n = {n}, got {n_check}")
+    psi0, tol = _speed_psi0_and_tol(args, 90.0)
+    n, n_check = _meshes(args)
     starts = 1 if args.starts is None else args.starts
     if starts < 1:
         raise InputError(f"starts: must be >= 1, got {starts}")
@@ -124,18 +136,8 @@ def _cmd_design_crease_gap(args):
         raise InputError("crease: --target-speed with --crease designs the gap only (no --free-s0 or --save)")
     if args.starts is not None and args.starts != 1:
         raise InputError(f"starts: --target-speed with --crease runs from one start, got {args.starts}")
-    psi0 = 180.0 if args.psi0 is None else args.psi0
-    if not math.isfinite(psi0) or not 0 < psi0 <= 180:
-        raise InputError(f"psi0: must be in (0, 180] degrees, got {psi0}")
-    tol = args.speed_tol
-    if not math.isfinite(tol) or not 0 < tol < 1:
-        raise InputError(f"speed-tol: must be a relative tolerance in (0, 1), got {tol}")
-    n = 48 if args.n is None else args.n
-    if n < 8 or n % 2:
-        raise InputError(f"n: must be an even integer >= 8, got {n}")
-    n_check = 2 * n if args.check_n is None else args.check_n
-    if n_check < 8 or n_check % 2 or n_check <= n:
-        raise InputError(f"check-n: must be an even integer > n = {n}, got {n_check}")
+    psi0, tol = _speed_psi0_and_tol(args, 180.0)
+    n, n_check = _meshes(args)
     bounds = _bounds(args.bounds)
     if set(bounds) - {"gap"}:
         raise InputError("bounds: --target-speed with --crease designs the gap only (gap=LO:HI)")
@@ -189,12 +191,7 @@ def _check_crease_study(args):
         raise InputError("s0: the crease studies use creases of width 0.02 L")
     if args.tol is not None and args.tol <= 0:
         raise InputError(f"tol: must be > 0, got {args.tol}")
-    n = 48 if args.n is None else args.n
-    if n < 8 or n % 2:
-        raise InputError(f"n: must be an even integer >= 8, got {n}")
-    n_check = 2 * n if args.check_n is None else args.check_n
-    if n_check < 8 or n_check % 2 or n_check <= n:
-        raise InputError(f"check-n: must be an even integer > n = {n}, got {n_check}")
+    n, n_check = _meshes(args)
     if args.starts is not None and args.starts != 1:
         raise InputError(f"starts: the crease studies run from one start, got {args.starts}")
     return n, n_check
