@@ -131,8 +131,10 @@ def _loss(speeds, moved, reach, target, v_launch, v_spare, d_spare, margin):
     miss = jnp.maximum(0.0, (1.0 + margin) * v_launch - speeds[target]) / v_launch
     hit = jnp.where(others, jnp.maximum(0.0, speeds - (1.0 - margin) * v_spare) / v_spare, 0.0)
     loss = miss**2 + jnp.sum(hit**2) + reach**2
-    if d_spare is not None:
-        push = jnp.where(others, jnp.maximum(0.0, moved - (1.0 - margin) * d_spare) / d_spare, 0.0)
+    if d_spare is not None:  # (M,) bounds, inf where a ball may move
+        bound = jnp.isfinite(d_spare) & others
+        d = jnp.where(bound, d_spare, 1.0)
+        push = jnp.where(bound, jnp.maximum(0.0, moved - (1.0 - margin) * d) / d, 0.0)
         loss = loss + jnp.sum(push**2)
     return loss
 
@@ -180,8 +182,9 @@ def design_program(scene, bodies, target, start_deg, *, v_launch=5.0, v_spare=1.
     `start_deg` (with `scan_deg`, from the best of the `scan_size` x `scan_size` grid of that
     spacing around it: the program with the widest margin, the smaller of the target's
     speed over `v_launch` and the others' under `v_spare`, relative),
-    at most `steps` iterations, stopping once the loss is zero (with `d_spare`, spared balls
-    must also end within it of their places); then a forward run
+    at most `steps` iterations, stopping once the loss is zero (with `d_spare`, a distance or
+    a dict ball name -> distance, those spared balls must also end within it of their
+    places); then a forward run
     of the design on the finer `check_scene` (default: `scene` at `n_check` segments)."""
     import optax
 
@@ -189,12 +192,21 @@ def design_program(scene, bodies, target, start_deg, *, v_launch=5.0, v_spare=1.
     if target not in names:
         raise ValueError(f"target must be one of {names}, got {target!r}")
     k = names.index(target)
+    if d_spare is None:
+        bounds = None
+    elif isinstance(d_spare, dict):
+        unknown = set(d_spare) - set(names)
+        if unknown:
+            raise ValueError(f"d_spare: unknown balls {sorted(unknown)} (balls: {names})")
+        bounds = jnp.asarray([float(d_spare.get(nm, math.inf)) for nm in names])
+    else:
+        bounds = jnp.full((len(names),), float(d_spare))
     tic = time.perf_counter()
     theta0 = jr.initial_state(scene, "down").theta
 
     def loss_fn(p):
         v, moved, reach, code = _speeds_and_code(scene, bodies, p, theta0, t1, k)
-        return _loss(v, moved, reach, k, v_launch, v_spare, d_spare, margin), (v, moved, code)
+        return _loss(v, moved, reach, k, v_launch, v_spare, bounds, margin), (v, moved, code)
 
     vg = jax.value_and_grad(loss_fn, has_aux=True)
     opt = optax.adam(lr)
@@ -204,9 +216,12 @@ def design_program(scene, bodies, target, start_deg, *, v_launch=5.0, v_spare=1.
         offsets = [(i * scan_deg, j * scan_deg) for i in range(-h, h + 1) for j in range(-h, h + 1)]
         scores = []
         for o in offsets:
-            _, (v, _, c) = loss_fn(p + jnp.asarray(o))
-            v = np.asarray(v)
+            _, (v, moved, c) = loss_fn(p + jnp.asarray(o))
+            v, moved = np.asarray(v), np.asarray(moved)
             spare = [1.0 - v[m] / v_spare for m in range(v.size) if m != k]
+            if bounds is not None:
+                spare += [1.0 - moved[m] / float(bounds[m]) for m in range(v.size)
+                          if m != k and math.isfinite(float(bounds[m]))]
             score = min([v[k] / v_launch - 1.0] + spare)
             scores.append(score if c == jr.RESULTS.successful and np.isfinite(score) else -math.inf)
         p = p + jnp.asarray(offsets[int(np.argmax(scores))])
@@ -238,7 +253,8 @@ def design_program(scene, bodies, target, start_deg, *, v_launch=5.0, v_spare=1.
     check_displaced = {n: float(moved_fine[m]) for m, n in enumerate(names)}
     confirmed = bool(a.result == jr.RESULTS.successful and check[target] >= v_launch
                      and all(s <= v_spare for n, s in check.items() if n != target)
-                     and (d_spare is None or all(x <= d_spare for n, x in check_displaced.items() if n != target)))
+                     and (bounds is None or all(check_displaced[n] <= float(bounds[m]) for m, n in enumerate(names)
+                                                if n != target)))
     return ProgramDesign(target=target, peaks_deg=tuple(float(x) for x in peaks), speeds=speeds, check=check,
                          displaced=displaced, check_displaced=check_displaced,
                          reached=reached, confirmed=confirmed, history=history, iterations=len(history) - 1,
@@ -310,9 +326,11 @@ class Fig4Result:
 
 
 def fig4_study(*, n=16, n_check=24, v_launch=FIG4_V_LAUNCH, v_spare=FIG4_V_SPARE, steps=25, scan_deg=15.0,
-               scan_size=7, t1=1.8) -> Fig4Result:
+               scan_size=7, t1=1.8, hold=(), d_hold=0.005) -> Fig4Result:
     """Design the paper's three programs one after the other, each on the balls the previous
     ones leave (module docstring), and re-check them in one sequence run on the finer mesh.
+    `hold`: balls that the programs not aimed at them must also leave within `d_hold` (L) of
+    their places (`design_program`'s `d_spare`).
 
     Measured at the defaults (`benchmarks/results/actuate.md`): A (35, -55) deg and B (-40,
     65) deg are found by the scan alone and hold in the sequence run at N = 24 (right ball
@@ -320,15 +338,20 @@ def fig4_study(*, n=16, n_check=24, v_launch=FIG4_V_LAUNCH, v_spare=FIG4_V_SPARE
     the centre ball (0.56 v*) and lifts it 0.03 L, out of the reach of every two-knot program
     (the symmetric snap reaches y = 0.48 L and not 0.49 L), so Adam has no contact to follow;
     in the sequence run at N = 24, where B leaves the centre ball in place, C's program
-    launches it at 4.26 v*, below `v_launch`. `confirmed` is False."""
+    launches it at 4.26 v*, below `v_launch`. `confirmed` is False. Holding the centre ball
+    in place (`hold=("centre",)`, 0.005 L) keeps it in C's reach (C (90, 90) deg: 5.83 v* at
+    N = 16, 5.40 at N = 24) but leaves B a narrow program, (-41.4, 39.4) deg, 5.52 v* at
+    N = 16, that in the sequence run at N = 24 nudges the left ball (0.87 v*) instead of
+    launching it."""
     tic = time.perf_counter()
     scene = jr.make_scene(60.0, 0.5, n=n)
     theta0 = jr.initial_state(scene, "down").theta
     present = fig4_bodies()
     designs = []
     for target in FIG4_PROGRAMS:
+        keep = {nm: d_hold for nm in hold if nm in present.names and nm != target} or None
         d = design_program(scene, present, target, FIG4_STARTS[target], v_launch=v_launch, v_spare=v_spare,
-                           steps=steps, n_check=n_check, scan_deg=scan_deg, scan_size=scan_size, t1=t1)
+                           d_spare=keep, steps=steps, n_check=n_check, scan_deg=scan_deg, scan_size=scan_size, t1=t1)
         designs.append(d)
         run = jr.actuate(scene, present, two_knot_program(d.peaks_deg), theta0=theta0, t1=t1)
         present = remaining_bodies(present, run, [target])

@@ -280,6 +280,18 @@ def test_program_loss_is_zero_exactly_inside_the_goal():
     assert float(_loss(v, moved, 0.3, 2, 5.0, 1.0, None, 0.1)) == pytest.approx(0.09)  # the reach term
     assert float(_loss(v, moved, 0.0, 2, 5.0, 1.0, 0.01, 0.1)) == 0.0  # the target may move
     assert float(_loss(v, moved.at[0].set(0.0095), 0.0, 2, 5.0, 1.0, 0.01, 0.1)) > 0  # a spared ball may not
+    # bounds per ball (design_program's d_spare={"name": distance}): inf where a ball may move
+    per_ball = jnp.array([0.01, jnp.inf, jnp.inf])
+    far = moved.at[1].set(5.0)
+    assert float(_loss(v, far, 0.0, 2, 5.0, 1.0, per_ball, 0.1)) == 0.0
+    assert float(_loss(v, far.at[0].set(0.0095), 0.0, 2, 5.0, 1.0, per_ball, 0.1)) > 0
+    g = jax.grad(lambda m: _loss(v, m, 0.0, 2, 5.0, 1.0, per_ball, 0.1))(far.at[0].set(0.0095))
+    assert np.all(np.isfinite(np.asarray(g))) and float(g[0]) > 0 and float(g[1]) == 0.0
+    from jaxrod import design
+
+    with pytest.raises(ValueError, match=r"d_spare: unknown balls \['middle'\]"):
+        design.design_program(jr.make_scene(60.0, 0.5, n=N), design.fig4_bodies(), "right", (50.0, -40.0),
+                              d_spare={"middle": 0.01})
 
 
 @pytest.mark.slow  # ~60 s on 2 cores (the reverse-mode compile of a three-ball run); CI checks the
