@@ -403,7 +403,8 @@ def crease_gap_for_speed(target_speed, creases, *, psi0_deg=180.0, s0=0.02, gap=
     `jaxrod.snap_speed` (RATTLE), from `gap`, each step kept inside `bounds` (halved towards
     the current gap when it leaves them) and, once gaps on both sides of the target are
     known, inside that bracket (a bisection where the Newton step leaves it: the fixed-step
-    snap's v_s wiggles on small scales, so its derivative can mislead near the root), until $|v_s-v^\ast| \le 0.1\,$`tol`$\,v^\ast$ or
+    snap's v_s wiggles on small scales, so its derivative can mislead near the root), until
+    $|v_s-v^\ast| \le 0.1\,$`tol`$\,v^\ast$ or
     `max_iter` steps; then re-checked by `jaxrod.snap_speed_run` on `n_check` segments.
     Needs float64."""
     import time

@@ -131,7 +131,8 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), con
 
     def one(carry, g):
         t_prev, m_prev, ok_prev = carry
-        scene = par.set(float_scene(Scene(layout_strip(psi0, s0, layout), Clamps(g), mesh, contact=_contact(contact))), 0.0)
+        strip = layout_strip(psi0, s0, layout)
+        scene = par.set(float_scene(Scene(strip, Clamps(g), mesh, contact=_contact(contact))), 0.0)
         # both start states through one traced body (`lax.map` over the side): one compiled
         # copy of the warm Newton and of the homotopy instead of two (XLA compile at -O0 25 s -> 20 s)
         is_sds = lambda x: isinstance(x, jax.ShapeDtypeStruct)  # noqa: E731

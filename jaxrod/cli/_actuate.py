@@ -7,9 +7,10 @@ Fig. 4 sequence: the three programs of `jaxrod.design.FIG4_PEAKS` one after the 
 (`jaxrod.design.sequence_program`, the strip reset down between them) on the three balls,
 and reports per program (`programs`) the peak speed of each ball still on the table, which
 ball it launched (faster than `FIG4_V_LAUNCH`) and whether it spared the others (slower than
-`FIG4_V_SPARE`); exit 3 unless every program launched its own ball and only it. `--objects FILE.json` holds the balls
-and the contact law, `{"balls": [{"name", "x", "y", "radius", "mass"}, ...], "stiffness",
-"thickness", "table": {"deceleration"} | "floor": {"height"}}` (only `balls` required);
+`FIG4_V_SPARE`); exit 3 unless every program launched its own ball and only it.
+`--objects FILE.json` holds the balls and the contact law, `{"balls": [{"name", "x", "y",
+"radius", "mass"}, ...], "stiffness", "thickness", "table": {"deceleration"} | "floor":
+{"height"}}` (only `balls` required);
 without it the three balls of `DEFAULT_OBJECTS` (those of `jaxrod.design.fig4_bodies`) lie on
 a table above the strip. The JSON
 output has the hits in time order (name, time, impulse, launch speed), the snaps (time,
