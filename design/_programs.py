@@ -100,7 +100,8 @@ def two_knot_program(peaks_deg, *, ramp=1.0, hold=0.8) -> jr.Program:
     return jr.Program(jnp.array([0.0, ramp, ramp + hold]), jnp.stack([z, p[0], p[0]]), jnp.stack([z, p[1], p[1]]))
 
 
-def sequence_windows(count, *, ramp=1.0, hold=0.8, rest=1.0):
+def sequence_windows(count, *, ramp=SEQUENCE_TIMING["ramp"], hold=SEQUENCE_TIMING["hold"],
+                     rest=SEQUENCE_TIMING["rest"]):
     """The time windows (start, end) in T of the `count` programs of `sequence_program` with
     the same timing: each from its first move to the end of its reset and rest (the last to
     the end of its hold)."""
@@ -108,7 +109,8 @@ def sequence_windows(count, *, ramp=1.0, hold=0.8, rest=1.0):
     return [(k * period, k * period + (period if k < count - 1 else ramp + hold)) for k in range(count)]
 
 
-def sequence_program(peaks, *, ramp=1.0, hold=0.8, reset=-110.0, rest=1.0) -> jr.Program:
+def sequence_program(peaks, *, ramp=SEQUENCE_TIMING["ramp"], hold=SEQUENCE_TIMING["hold"],
+                     reset=SEQUENCE_TIMING["reset"], rest=SEQUENCE_TIMING["rest"]) -> jr.Program:
     """The designed programs one after the other in one run: each move to its peaks and hold,
     then a reset (both clamps to `reset` degrees, which snaps the strip back down, then to 0)
     and `rest` T of rest before the next (`sequence_windows` gives each program's window)."""
@@ -280,12 +282,10 @@ def remaining_bodies(bodies, run, launched):
                      floor=bodies.floor)
 
 
-def sequence_speeds(run, targets, *, timing=None):
+def sequence_speeds(run, targets, **timing):
     """Per program of a sequence run (`targets` in order): each ball's peak speed (v*) within
-    the program's window (`sequence_windows`), for the balls still on the table then (not
-    the target of an earlier program)."""
-    timing = dict(SEQUENCE_TIMING if timing is None else timing)
-    timing.pop("reset", None)
+    the program's window (`sequence_windows`, with its `timing` keywords), for the balls
+    still on the table then (not the target of an earlier program)."""
     t = np.asarray(run.t)
     v = np.hypot(*np.moveaxis(np.asarray(run.ball_velocity), -1, 0))
     out = []

@@ -165,10 +165,8 @@ def _fig4_programs(act):
     import jaxrod.design as ds
 
     targets = list(ds.FIG4_PROGRAMS)
-    timing = {k: v for k, v in ds.SEQUENCE_TIMING.items() if k != "reset"}
     out, confirmed = [], True
-    for k, (sp, win) in enumerate(zip(ds.sequence_speeds(act, targets),
-                                      ds.sequence_windows(len(targets), **timing))):
+    for k, (sp, win) in enumerate(zip(ds.sequence_speeds(act, targets), ds.sequence_windows(len(targets)))):
         launched = [nm for nm, v in sp.items() if v >= ds.FIG4_V_LAUNCH]
         spared = all(v <= ds.FIG4_V_SPARE for nm, v in sp.items() if nm != targets[k])
         good = launched == [targets[k]] and spared
