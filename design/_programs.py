@@ -26,6 +26,9 @@ ringing that would otherwise make the launch speed wiggle on the scale of 1e-4 r
 (`jaxrod.dynamics._actuate`). It is minimized by Adam (optax) on $p$ in degrees, and the
 design is re-checked by an independent forward run on a finer mesh.
 
+**Steps.** A step that does not lower the loss is undone, and Adam restarts from the best
+program at half the step.
+
 **Start.** The loss is rugged in the peaks (a ball is struck by one part of the strip or
 another, or brushed twice), so with `scan_deg` the optimizer starts from the best of a grid
 of programs around the naive start, `scan_deg` degrees apart (forward runs only): the one
@@ -184,7 +187,10 @@ def design_program(scene, bodies, target, start_deg, *, v_launch=5.0, v_spare=1.
     `start_deg` (with `scan_deg`, from the best of the `scan_size` x `scan_size` grid of that
     spacing around it: the program with the widest margin, the smaller of the target's
     speed over `v_launch` and the others' under `v_spare`, relative),
-    at most `steps` iterations, stopping once the loss is zero (with `d_spare`, a distance or
+    at most `steps` iterations, stopping once the loss is zero; a step that does not lower the
+    loss is undone and Adam restarts from the best program at half the step (the loss is flat
+    wherever a program misses every ball or does not snap, and Adam's momentum would carry it
+    there and leave it); (with `d_spare`, a distance or
     a dict ball name -> distance, those spared balls must also end within it of their
     places); then a forward run
     of the design on the finer `check_scene` (default: `scene` at `n_check` segments)."""
@@ -230,6 +236,7 @@ def design_program(scene, bodies, target, start_deg, *, v_launch=5.0, v_spare=1.
     state = opt.init(p)
     history = []
     best = None
+    scale = 1.0
     for it in range(steps + 1):
         (loss, (v, moved, code)), g = vg(p)
         loss = float(loss)
@@ -237,10 +244,15 @@ def design_program(scene, bodies, target, start_deg, *, v_launch=5.0, v_spare=1.
         ok = code == jr.RESULTS.successful and math.isfinite(loss)
         if ok and (best is None or loss < best[0]):
             best = (loss, np.asarray(p), np.asarray(v), np.asarray(moved), jr.result_name(code))
+            best_at = (p, g)
+        elif best is not None:  # no descent: back to the best program, Adam restarted at half the step
+            p, g = best_at
+            state = opt.init(p)
+            scale *= 0.5
         if ok and loss == 0.0 or it == steps or not np.all(np.isfinite(np.asarray(g))):
             break
         upd, state = opt.update(g, state, p)
-        p = optax.apply_updates(p, upd)
+        p = optax.apply_updates(p, jax.tree.map(lambda u: scale * u, upd))
     loss, peaks, v, moved, code = best if best is not None else (
         float("inf"), np.asarray(p), np.asarray(v), np.asarray(moved), jr.result_name(code))
     speeds = {n: float(v[m]) for m, n in enumerate(names)}

@@ -71,19 +71,20 @@ class StudyResult:
 
 
 def snap_angle_study(alpha_up_deg=60.0, alpha_down_deg=-70.0, *, bounds=None, s0=0.02, starts=4, n_coarse=40,
-                     n=160, n_check=320, tol=0.1, max_iter=30, seed=0, progress=True) -> StudyResult:
+                     n=160, n_check=320, tol=0.1, max_iter=30, seed=0, progress=True, optimizer="lm") -> StudyResult:
     """Study (a): find (Psi0, G/L) with the given critical angles (degrees).
 
     `starts` random starts (uniform in the bounds; default bounds Psi0 in (10, 180) deg,
     G/L in (0.05, 0.95); pass e.g. `bounds={"gap": (0.3, 0.95)}`) run on `n_coarse`
     segments; the best is refined on `n` segments (discretization error of alpha_c
-    ~ 1000 deg / N^2, so n = 160 is within ~0.04 deg of converged) and checked at `n_check`."""
+    ~ 1000 deg / N^2, so n = 160 is within ~0.04 deg of converged) and checked at `n_check`.
+    `optimizer`: "lm" or an optax transformation (`optimize`, which compares them)."""
     param = Parametrization(free=("psi0_deg", "gap"), bounds=bounds, fixed={"s0": s0})
     z0 = jnp.concatenate([param.from_values(psi0_deg=60.0, gap=0.5)[None],
                           param.sample(jax.random.PRNGKey(seed), max(starts - 1, 0))])
     terms_c = (AlphaUp(alpha_up_deg, tol=tol), AlphaDown(alpha_down_deg, tol=tol))
-    coarse = optimize(terms_c, param, z0, n=n_coarse, max_iter=max_iter, progress=progress)
-    fine = optimize(terms_c, param, coarse.best.z, n=n, max_iter=max_iter, progress=progress,
+    coarse = optimize(terms_c, param, z0, n=n_coarse, max_iter=max_iter, progress=progress, optimizer=optimizer)
+    fine = optimize(terms_c, param, coarse.best.z, n=n, max_iter=max_iter, progress=progress, optimizer=optimizer,
                     meta={"study": "a", "coarse_n": n_coarse})
     return StudyResult(coarse, fine.best, verify_snap_angles(fine.best, n_check, tol))
 
@@ -213,13 +214,14 @@ class SpeedStudyResult:
         return d
 
 
-def _run_starts(terms, param, starts, n, max_iter, progress, meta):
+def _run_starts(terms, param, starts, n, max_iter, progress, meta, optimizer="lm"):
     """`optimize` from each start in turn (B = 1 each: one compiled problem, no vmap over
     the dynamics). Returns (best MultiStartResult, all)."""
     runs = []
     for vals in starts:
         z0 = param.from_values(**vals)
-        runs.append(optimize(terms, param, z0, n=n, max_iter=max_iter, progress=progress, meta=meta))
+        runs.append(optimize(terms, param, z0, n=n, max_iter=max_iter, progress=progress, meta=meta,
+                             optimizer=optimizer))
 
     def key(r):
         loss = float(r.best.loss)
@@ -234,12 +236,13 @@ def _speed_of(run):
 
 
 def snap_speed_study(target_speed=20.0, psi0_deg=90.0, *, s0=0.02, free_s0=False, bounds=None, gaps=(0.5,),
-                     n=48, n_check=96, tol=0.01, max_iter=20, check_rtol=1e-9, progress=True,
+                     n=48, n_check=96, tol=0.01, max_iter=20, check_rtol=1e-9, progress=True, optimizer="lm",
                      **speed_options) -> SpeedStudyResult:
     """Study (c): the gap G/L (and s0 with `free_s0`) at which the snap up of a strip with
     fold angle `psi0_deg` has v_s = `target_speed` v* (relative tolerance `tol`, 1 %).
 
-    Levenberg-Marquardt from each start gap in `gaps` on the design mesh `n` (default
+    Levenberg-Marquardt (or the optax transformation `optimizer`) from each start gap in
+    `gaps` on the design mesh `n` (default
     bounds G/L in (0.05, 0.95), s0 in (0.005, 0.1)), stopping at 0.1 `tol`; the best design
     is re-checked on `n_check` segments by `verify_snap_speed`. A target no design in the
     bounds reaches ends with the closest design found and `reached = False` ("target not
@@ -252,7 +255,7 @@ def snap_speed_study(target_speed=20.0, psi0_deg=90.0, *, s0=0.02, free_s0=False
     param = Parametrization(free=free, bounds=bounds, fixed={"psi0_deg": psi0_deg, "s0": s0})
     term = SnapSpeed(target_speed, tol=tol * abs(target_speed), **speed_options)
     starts = [{"gap": float(g), "s0": s0} for g in gaps]
-    best, runs = _run_starts((term,), param, starts, n, max_iter, progress, {"study": "c"})
+    best, runs = _run_starts((term,), param, starts, n, max_iter, progress, {"study": "c"}, optimizer)
     d = best.best
     v = _speed_of(best)
     chk = verify_snap_speed(d.psi0_deg, d.gap, d.s0, n_check, target_speed, tol=tol, rtol=check_rtol)
@@ -333,7 +336,7 @@ def _polish_psi0(d, terms, param, n, window, xtol):
 
 def fastest_snap_study(min_gap=0.3, *, s0=0.02, psi0_bounds=(10.0, 180.0), max_gap=0.95,
                        starts=((90.0, 0.5),), goal=100.0, n=48, n_check=96, max_iter=20, check_rtol=1e-9,
-                       polish=True, polish_window=15.0, polish_xtol=0.05, progress=True,
+                       polish=True, polish_window=15.0, polish_xtol=0.05, progress=True, optimizer="lm",
                        **speed_options) -> SpeedStudyResult:
     """Study (b): maximize v_s / v* of the snap up over (Psi0, G/L), G/L in (`min_gap`,
     `max_gap`), Psi0 in `psi0_bounds` (degrees), s0 fixed.
@@ -350,7 +353,8 @@ def fastest_snap_study(min_gap=0.3, *, s0=0.02, psi0_bounds=(10.0, 180.0), max_g
     golden-section search (`golden_max`) on [Psi0 - `polish_window`, Psi0 +
     `polish_window`] to `polish_xtol` degrees, on the program the optimizer compiled (no
     new compilation; ~17 evaluations), and keeps the better point (`polish` on the result
-    records both). The best design is re-checked on `n_check` segments.
+    records both). The best design is re-checked on `n_check` segments. `optimizer`: "lm"
+    or an optax transformation (gradient ascent on v_s then, by its own steps).
 
     Measured (N = 48, check N = 96, from Psi0 = 90 deg, G/L = 0.5; `jaxrod.snap_speed` with
     RATTLE, benchmarks/results/design.md, 2026-12-02): 20 LM iterations end at G/L = 0.3
@@ -376,7 +380,8 @@ def fastest_snap_study(min_gap=0.3, *, s0=0.02, psi0_bounds=(10.0, 180.0), max_g
                             fixed={"s0": s0})
     term = SnapSpeed(goal, tol=1.0, **speed_options)
     st = [{"psi0_deg": float(p), "gap": float(g)} for p, g in starts]
-    best, runs = _run_starts((term,), param, st, n, max_iter, progress, {"study": "b", "min_gap": min_gap})
+    best, runs = _run_starts((term,), param, st, n, max_iter, progress, {"study": "b", "min_gap": min_gap},
+                             optimizer)
     d = best.best
     rec = None
     if polish:

@@ -4,6 +4,7 @@ Fast tests use fold-height objectives (one Newton solve per evaluation); the cri
 checks compile `jaxrod.snap_angles` and its sensitivity (about a minute each) and are
 marked slow (`pytest -m slow tests/test_design.py`)."""
 
+import json
 import math
 
 import equinox as eqx
@@ -204,6 +205,23 @@ def test_optax_optimizer_decreases_the_objective():
                       max_iter=6, progress=False)
     h = np.asarray(res.best.history_loss)
     assert h[-1] < h[0]
+
+
+def test_lm_and_adam_reach_the_same_design():
+    """The gap with a given fold height (one free parameter: one design), by Levenberg-Marquardt
+    and by Adam on the same compiled problem: both reach it, to the target's tolerance, and LM
+    needs fewer iterations (its step solves the Gauss-Newton model; Adam's is a fixed size)."""
+    optax = pytest.importorskip("optax")
+    param = ds.Parametrization(free=("gap",), fixed={"psi0_deg": 70.0, "s0": 0.02})
+    term = (ds.FoldHeight(-0.22, state="down", tol=1e-5),)
+    lm = ds.optimize(term, param, n=N, max_iter=40, progress=False).best
+    adam = ds.optimize(term, param, n=N, optimizer=optax.adam(0.05), max_iter=200, progress=False).best
+    assert bool(lm.reached) and bool(adam.reached), (lm.message, adam.message)
+    assert abs(float(lm.achieved[0]) + 0.22) <= 1e-5 and abs(float(adam.achieved[0]) + 0.22) <= 1e-5
+    # the fold height's slope in G/L is of order 1: designs within a few tolerances of each other
+    assert abs(lm.gap - adam.gap) < 1e-4
+    assert int(lm.num_iterations) < int(adam.num_iterations)
+    assert json.loads(lm.meta)["optimizer"] == "lm" and json.loads(adam.meta)["optimizer"] != "lm"
 
 
 # --- critical angles (slow: compiles snap_angles and the sensitivity) -------------------

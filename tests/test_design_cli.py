@@ -18,6 +18,10 @@ from jaxrod.cli._main import main
     (["design", "--target-alpha-up", "60", "--starts", "0"], "starts"),
     (["design", "--target-alpha-up", "60", "--s0", "-1"], "s0"),
     (["design", "--target-speed", "-5"], "target-speed"),
+    (["design", "--target-alpha-up", "60", "--optimizer", "sgd"], "optimizer"),
+    (["design", "--target-alpha-up", "60", "--optimizer", "adam:-1"], "optimizer"),
+    (["design", "--target-alpha-up", "60", "--optimizer", "adam:fast"], "optimizer"),
+    (["design", "--study", "crease-position", "--optimizer", "adam"], "optimizer"),
 ])
 def test_design_bad_input_is_one_line_exit_2(argv, word, capsys):
     assert main(argv) == 2
@@ -57,3 +61,32 @@ def test_reproduce_quick_writes_report(tmp_path, capsys):
     for name in ("speed_plane.png", "fig1c_fold_speed.png", "fig3_snap/chrono.png", "fig3_snap/speed_map.png",
                  "fig3_snap/energies.png", "fig4_asymmetric/chrono.png"):
         assert (tmp_path / name).stat().st_size > 1000, name
+
+
+@pytest.mark.parametrize("flag, expect", [(None, "lm"), ("lm", "lm"), ("adam", 0.05), ("adam:0.2", 0.2)])
+def test_design_optimizer_option_reaches_optimize(flag, expect, monkeypatch, capsys):
+    """`--optimizer lm|adam[:LR]`: the angle design hands `optimize` "lm" or an optax Adam of that
+    learning rate (checked by its first update of a unit gradient), and the JSON names it."""
+    import jax.numpy as jnp
+
+    import jaxrod.design as ds
+
+    seen = {}
+    real = ds.optimize
+
+    def spy(terms, param, z0, **kw):  # records the optimizer, runs a cheap fold-height design instead
+        seen["optimizer"] = kw["optimizer"]
+        return real((ds.FoldHeight(-0.22, state="down", tol=1e-4),), param, z0, **{**kw, "max_iter": 1})
+
+    monkeypatch.setattr(ds, "optimize", spy)
+    argv = ["design", "--target-alpha-up", "60", "--n", "24", "--starts", "1", "--json"]
+    main(argv + ([] if flag is None else ["--optimizer", flag]))
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["optimizer"] == (flag or "lm")
+    opt = seen["optimizer"]
+    if expect == "lm":
+        assert opt == "lm"
+    else:
+        g = jnp.ones(2)
+        upd, _ = opt.update(g, opt.init(g), g)
+        assert abs(float(upd[0]) + expect) < 1e-3 * expect  # Adam's first step: -lr sign(g)

@@ -2,6 +2,8 @@
 notebooks/README.md) and prints what it must. One file per notebook, so that the xdist
 workers share them out (tests/conftest.py schedules the slowest first)."""
 
+import re
+
 import pytest
 
 pytest.importorskip("nbclient")
@@ -18,3 +20,4 @@ pytestmark = pytest.mark.slow
 def test_notebook_02_snap_angle_design():
     out = notebook_text(run_notebook("02_snap_angle_design.ipynb"))
     assert "'reached': True" in out and "target not reached" in out
+    assert re.search(r"LM: \d+ iterations, reached True; Adam: \d+ iterations, reached True", out)

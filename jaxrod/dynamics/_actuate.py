@@ -61,7 +61,7 @@ import numpy as np
 from ._bodies import Bodies, body_clearance, body_energy, friction_force, quadrature_points, strip_body_energy
 from ._equations import Dissipation, check_scene, inverse_node_mass, kinematics, kinetic_energy, potential_energy, scene_at
 from ._program import Program
-from ._rattle import FixedStepRattle, angles, project_velocity, rattle_forces, shake, substeps
+from ._rattle import FixedStepRattle, angles, project_velocity, rattle_forces_and_rates, shake, substeps
 from ._simulate import DT_CAP
 from ..energy.contact import safe_norm
 from ..energy.geometry import discretize, scene_dtype
@@ -85,15 +85,16 @@ program (60, -30) deg: without viscosity its speed goes up and down (15.48, 15.5
 it the speed rises evenly by 0.0195 v* per 0.25 deg, and is 6 % lower (14.57 against 15.54)."""
 
 
-def _dissipated_power(t, omega, v, vb, args):
-    """Power of the dissipative forces at node velocities `v`, angular rates `omega` and ball
-    velocities `vb` (damping, drag, hinge viscosity, table friction)."""
-    scene, program, dissipation, bodies, d = args
+def _dissipated_power(omega, v, vb, rates, args):
+    """Power of the dissipative forces at node velocities `v`, angular rates `omega`, ball
+    velocities `vb` and clamp rates `rates = (rL, rR)` (damping, drag, hinge viscosity, table
+    friction)."""
+    scene, _, dissipation, bodies, d = args
     m = d.node_mass
     s2 = jnp.sum(v**2, -1)
     lam = scene.strip.line_density
     p = dissipation.damping * jnp.sum(m * s2) + dissipation.drag * jnp.sum((m / lam) * s2 * safe_norm(v))
-    _, _, rL, rR = program.angles(t)
+    rL, rR = rates
     full_rate = jnp.concatenate([rL[None], omega, -rR[None]])
     tau = dissipation.viscosity * jnp.diff(full_rate) / d.ell  # hinge viscous moments
     # minus the power of the viscous generalized forces on the angles: 2R less the power the
@@ -107,11 +108,11 @@ def _forces(t, theta, omega, x, v, xb, vb, args, q):
     """Strip node forces, clamp power, ball forces, the strip's force on each ball and the
     dissipated power (`q`: the contact's quadrature points per segment)."""
     scene, program, dissipation, bodies, d = args
-    f, clamp_power = rattle_forces(t, theta, omega, x, v, (scene, program, dissipation, None, d))
+    f, clamp_power, rates = rattle_forces_and_rates(t, theta, omega, x, v, (scene, program, dissipation, None, d))
     gx, gb = jax.grad(strip_body_energy, argnums=(0, 1))(x, xb, bodies, q)
     fs = -gb
     fb = fs - jax.grad(body_energy)(xb, bodies, scene.gravity) + friction_force(vb, bodies)
-    return f - gx, clamp_power, fb, fs, _dissipated_power(t, omega, v, vb, args)
+    return f - gx, clamp_power, fb, fs, _dissipated_power(omega, v, vb, rates, args)
 
 
 class RattleBodies(FixedStepRattle):
@@ -324,8 +325,6 @@ def _body_omega(bodies, scene):
 def _run(scene, bodies, program, theta0, dissipation, t1, dt, substeps, n_samples, n_frames, energy_tol, quad):
     dtype = theta0.dtype
     d = discretize(scene)
-    y0 = (jnp.stack([theta0, jnp.zeros_like(theta0)]), jnp.zeros(2, dtype), bodies.position.astype(dtype),
-          bodies.velocity.astype(dtype), jnp.zeros_like(bodies.position, dtype=dtype))
     args = (scene, program, dissipation, bodies, d)
     n = scene.mesh.n
     ts = jnp.linspace(0.0, t1, n_samples)
@@ -337,18 +336,24 @@ def _run(scene, bodies, program, theta0, dissipation, t1, dt, substeps, n_sample
         x, v = kinematics(q[0], q[1], dd)
         return aL, aR, dd, x, v
 
+    y0 = (jnp.stack([theta0, jnp.zeros_like(theta0)]), jnp.zeros(2, dtype), bodies.position.astype(dtype),
+          bodies.velocity.astype(dtype), jnp.zeros_like(bodies.position, dtype=dtype))
+
     def obs(t, y, a):
+        # the contact is evaluated at the sampled state (one value-and-gradient pass): the
+        # step's own force, read through diffrax's linear interpolation between steps, would
+        # mark a sample next to a contact as touching by an interpolation weight of 1e-12
         q, acc, xb, vb, J = y
         aL, aR, dd, x, _ = strip_at(t, q)
-        fs = -jax.grad(strip_body_energy, argnums=1)(x, xb, bodies, quad)
+        e_contact, g_contact = jax.value_and_grad(strip_body_energy, argnums=1)(x, xb, bodies, quad)
         return dict(
             fold_height=x[n // 2, 1], height_left=x[n // 4, 1], height_right=x[(3 * n) // 4, 1],
             kinetic=kinetic_energy(q[0], q[1], dd),
             potential=potential_energy(q[0], scene_at(scene, aL, aR), dd),
             ball_kinetic=0.5 * jnp.sum(bodies.mass * jnp.sum(vb**2, -1)),
-            body_energy=strip_body_energy(x, xb, bodies, quad) + body_energy(xb, bodies, scene.gravity),
+            body_energy=e_contact + body_energy(xb, bodies, scene.gravity),
             work=acc[0], dissipated=acc[1], alpha_left=aL, alpha_right=aR,
-            ball_position=xb, ball_velocity=vb, strip_force=fs, impulse=J,
+            ball_position=xb, ball_velocity=vb, strip_force=-g_contact, impulse=J,
             ball_clearance=body_clearance(x, xb, bodies))
 
     def frames(t, y, a):

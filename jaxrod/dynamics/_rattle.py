@@ -67,11 +67,18 @@ def rattle_forces(t, theta, omega, x, v, args):
     given node velocities `v`, instead of re-deriving both from $(\theta,\dot\theta)$ by
     trigonometry and cumulative sums (`node_forces`; 25 % of a step at N = 50). Returns
     `(f, clamp power)`."""
+    f, power, _ = rattle_forces_and_rates(t, theta, omega, x, v, args)
+    return f, power
+
+
+def rattle_forces_and_rates(t, theta, omega, x, v, args):
+    """`rattle_forces` and the clamps' angular rates `(rL, rR)` at `t` (the actuator's
+    dissipated power needs them, and reads them here rather than from the program again)."""
     scene, protocol, dissipation, _, d = args
     dx = jnp.diff(x, axis=0)
     nn = jnp.stack([-dx[:, 1], dx[:, 0]], -1) / d.h[:, None]
     f, _, (gL, gR, rL, rR) = applied_forces(t, theta, omega, nn, v, scene, protocol, dissipation, d, x)
-    return f, gL * rL + gR * rR
+    return f, gL * rL + gR * rR, (rL, rR)
 
 
 def project_velocity(x, w, invm):
