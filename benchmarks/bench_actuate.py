@@ -111,7 +111,7 @@ def main():
                   f"{di['t1']} T run, N = {di['n']}): {di['value_and_grad_s']:.2f} s "
                   f"({di['ratio']:.1f}x the forward run's {di['forward_s']:.2f} s; compile {di['compile_s']:.0f} s).", "",
               "## The paper's Fig. 4 programs", "", study.table(), "",
-              f"Each program designed on the balls the ones before it left (N = 16), then the three in "
+              f"Each program designed on the balls the ones before it left (N = {study.n}), then the three in "
               f"sequence in one run with the three balls (N = {res['sequence']['n']}, "
               f"{res['sequence']['steps']} steps, {res['sequence']['run_s']:.1f} s): "
               f"{res['sequence']['result']}, energy error {res['sequence']['energy_error']:.1e}; each program "

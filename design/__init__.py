@@ -40,11 +40,15 @@ from ._studies import verify_snap_angles as verify_snap_angles
 from ._studies import SpeedStudyResult as SpeedStudyResult
 from ._studies import SpeedVerification as SpeedVerification
 from ._studies import verify_snap_speed as verify_snap_speed
+from ._programs import descend as descend
 from ._programs import design_program as design_program
 from ._programs import Fig4Result as Fig4Result
 from ._programs import fig4_bodies as fig4_bodies
+from ._programs import fig4_objects_json as fig4_objects_json
 from ._programs import fig4_study as fig4_study
 from ._programs import ProgramDesign as ProgramDesign
+from ._programs import FIG4_N as FIG4_N
+from ._programs import FIG4_N_CHECK as FIG4_N_CHECK
 from ._programs import FIG4_PEAKS as FIG4_PEAKS
 from ._programs import FIG4_PROGRAMS as FIG4_PROGRAMS
 from ._programs import FIG4_V_LAUNCH as FIG4_V_LAUNCH

@@ -11,9 +11,8 @@ $$\mathcal L(p)=\Big(\frac{\max(0,\,(1+\mu)v_L-v_t)}{v_L}\Big)^2+\sum_{m\ne t}\B
 +\Big(\frac{\max(0,\,d_m-(1-\mu)d_S)}{d_S}\Big)^2\Big],$$
 
 the last sum only with a displacement bound $d_S$ (`d_spare`), $d_m$ the distance ball $m$
-ends up from where it started: a spared ball can be required to stay put, not only slow (in
-the Fig. 4 scene a side ball nudged at 0.7 v* by program A slid 0.05 L, out of program B's
-reach, and with $d_S$ = 0.01 L the optimizer found no program for A),
+ends up from where it started: a spared ball can be required to stay put, not only slow (a
+ball nudged below $v_S$ still slides on the table, and may leave the next program's reach),
 
 plus, while the strip never touches the target, its smallest gap beyond the contact layer in
 layer thicknesses squared (a run that misses the target would otherwise have no gradient).
@@ -61,26 +60,39 @@ import numpy as np
 import jaxrod as jr
 from jaxrod.energy.contact import safe_norm
 
-FIG4_BALLS = (("left", (0.05, 0.10)), ("centre", (0.25, 0.48)), ("right", (0.45, 0.10)))
+FIG4_BALLS = (("left", (0.05, 0.20)), ("centre", (0.25, 0.465)), ("right", (0.45, 0.20)))
 """Names and centres (L) of the Fig. 4 balls: radius 0.04 L, mass 0.05 lambda L, on a table
-with friction deceleration 5 L/T^2. The side balls lie where the snap of the far half reaches
-them; the centre ball lies just within the reach of the symmetric snap's overshoot and
-beyond that of the one-sided programs. Measured at N = 16, with the left ball where program
-A leaves it: the program (-15, 45) deg launches the left ball at 15.7 v* and strikes the
-centre ball at 0.12 v* from y = 0.48 L, at 7.1 v* from 0.47 L; the symmetric program (90, 90)
-deg launches the centre ball at 5.8 v* from 0.48 L and does not reach it from 0.49 L."""
+with friction deceleration 5 L/T^2. Where they lie decides whether the paper's selectivity
+exists at all; measured with `jaxrod.actuate` at N = 48 (the height a ball's centre may have
+and still be touched, radius plus contact layer 0.06 L): the side balls lie above what the
+near clamp's own turn reaches (program (35, -55) deg reaches y = 0.188 L over the left ball)
+and within the far half's snap (0.296 L over the right ball), so a one-clamp program strikes
+only the far side's ball; the centre ball lies within the reach of the two-clamp snaps
+(0.475-0.487 L) and beyond that of the one-clamp programs that launch a side ball cleanly
+((35, -55) deg: 0.456 L). The strike on the centre ball converges in the mesh only well
+inside that reach: the program (105, 75) deg launches it at 9.67 / 8.43 v* (N = 32 / 48)
+from y = 0.465 L, at 4.55 / 3.31 v* from 0.47 L; from 0.48 L the symmetric program (90, 90)
+deg reaches it at N = 16 and 24 (5.83, 5.40 v*) and misses it at N = 32 and 48. With the
+side balls at y = 0.10 L, the near clamp's turn brushes its ball (0.7 v*) and slides it
+0.07 L, out of the mirrored program's clean reach."""
 FIG4_STARTS = {"right": (50.0, -40.0), "left": (-40.0, 50.0), "centre": (120.0, 120.0)}
 """The naive programs the optimizer starts from, peaks (p_L, p_R) in degrees, per target."""
 FIG4_PROGRAMS = ("right", "left", "centre")
 """The order of the paper's sequence: one clamp (left turns, right ball), the mirror, both."""
-FIG4_PEAKS = ((35.0, -55.0), (-40.0, 65.0), (67.15760210856304, 82.82249341016471))
+FIG4_PEAKS = ((35.0, -70.0), (-70.0, 35.0), (75.0, 120.0))
 """The peaks (p_L, p_R) in degrees of programs A, B, C as `fig4_study()` designs them (at its
-defaults, N = 16; `benchmarks/bench_actuate.py` reruns it, a nightly test checks they agree).
-A and B meet their goals in the sequence run; C does not (see `fig4_study`)."""
+defaults; `benchmarks/bench_actuate.py` reruns it, a nightly test checks they agree); in
+the sequence run at `FIG4_N_CHECK` each launches its ball and spares the others."""
 FIG4_V_LAUNCH = 5.0
 """Launch speed (v*) a Fig. 4 program must give its ball."""
 FIG4_V_SPARE = 1.2
 """Speed (v*) below which a Fig. 4 program must leave the other balls on the table."""
+FIG4_N = 32
+"""The mesh `fig4_study` designs the programs on (segments): the contact step, not the strip,
+sets the step up to N = 32, so a run costs about the same as at N = 16."""
+FIG4_N_CHECK = 48
+"""The finer mesh of the Fig. 4 re-check (one run of the whole sequence) and of `jaxrod actuate
+--program paper-fig4`."""
 SEQUENCE_TIMING = dict(ramp=1.0, hold=0.8, reset=-110.0, rest=1.0)
 """`sequence_program`'s default timing (T, degrees)."""
 
@@ -194,8 +206,6 @@ def design_program(scene, bodies, target, start_deg, *, v_launch=5.0, v_spare=1.
     a dict ball name -> distance, those spared balls must also end within it of their
     places); then a forward run
     of the design on the finer `check_scene` (default: `scene` at `n_check` segments)."""
-    import optax
-
     names = bodies.names
     if target not in names:
         raise ValueError(f"target must be one of {names}, got {target!r}")
@@ -217,7 +227,6 @@ def design_program(scene, bodies, target, start_deg, *, v_launch=5.0, v_spare=1.
         return _loss(v, moved, reach, k, v_launch, v_spare, bounds, margin), (v, moved, code)
 
     vg = jax.value_and_grad(loss_fn, has_aux=True)
-    opt = optax.adam(lr)
     p = jnp.asarray(start_deg, float)
     if scan_deg is not None:
         h = scan_size // 2
@@ -233,28 +242,14 @@ def design_program(scene, bodies, target, start_deg, *, v_launch=5.0, v_spare=1.
             score = min([v[k] / v_launch - 1.0] + spare)
             scores.append(score if c == jr.RESULTS.successful and np.isfinite(score) else -math.inf)
         p = p + jnp.asarray(offsets[int(np.argmax(scores))])
-    state = opt.init(p)
-    history = []
-    best = None
-    scale = 1.0
-    for it in range(steps + 1):
-        (loss, (v, moved, code)), g = vg(p)
-        loss = float(loss)
-        history.append(loss)
-        ok = code == jr.RESULTS.successful and math.isfinite(loss)
-        if ok and (best is None or loss < best[0]):
-            best = (loss, np.asarray(p), np.asarray(v), np.asarray(moved), jr.result_name(code))
-            best_at = (p, g)
-        elif best is not None:  # no descent: back to the best program, Adam restarted at half the step
-            p, g = best_at
-            state = opt.init(p)
-            scale *= 0.5
-        if ok and loss == 0.0 or it == steps or not np.all(np.isfinite(np.asarray(g))):
-            break
-        upd, state = opt.update(g, state, p)
-        p = optax.apply_updates(p, jax.tree.map(lambda u: scale * u, upd))
-    loss, peaks, v, moved, code = best if best is not None else (
-        float("inf"), np.asarray(p), np.asarray(v), np.asarray(moved), jr.result_name(code))
+    best, history, (p, aux) = descend(vg, p, lr=lr, steps=steps, accept=lambda a: a[2] == jr.RESULTS.successful)
+    if best is not None:
+        loss, p, aux = best
+    else:
+        loss = float("inf")
+    peaks = np.asarray(p)
+    v, moved, code = (np.asarray(x) for x in aux)
+    code = jr.result_name(int(code))
     speeds = {n: float(v[m]) for m, n in enumerate(names)}
     displaced = {n: float(moved[m]) for m, n in enumerate(names)}
     reached = bool(loss == 0.0)
@@ -274,6 +269,40 @@ def design_program(scene, bodies, target, start_deg, *, v_launch=5.0, v_spare=1.
                          reached=reached, confirmed=confirmed, history=history, iterations=len(history) - 1,
                          seconds=time.perf_counter() - tic, codes=(code, jr.result_name(a.result)),
                          v_launch=v_launch, v_spare=v_spare)
+
+
+def descend(value_and_grad, p, *, lr, steps, accept=lambda aux: True):
+    """Adam (optax, learning rate `lr`) on `value_and_grad(p) -> ((loss, aux), grad)` from `p`:
+    at most `steps` steps, stopping once an accepted iterate's loss is zero. A step that does
+    not lower the loss below the best accepted one is undone, and Adam restarts from that best
+    point with its steps halved (a descent method: the design losses are flat where a program
+    misses every ball or does not snap, and Adam's momentum would carry it there and leave it).
+    `accept(aux)`: whether an iterate may be kept (its run succeeded).
+
+    Returns `(best, history, last)`: `best` = (loss, p, aux) of the lowest accepted iterate or
+    None, `history` every evaluated loss, `last` = (p, aux) of the last evaluation."""
+    import optax
+
+    opt = optax.adam(lr)
+    state = opt.init(p)
+    history, best, best_grad, scale = [], None, None, 1.0
+    for it in range(steps + 1):
+        (loss, aux), g = value_and_grad(p)
+        loss = float(loss)
+        history.append(loss)
+        last = (p, aux)
+        ok = bool(accept(aux)) and math.isfinite(loss)
+        if ok and (best is None or loss < best[0]):
+            best, best_grad = (loss, p, aux), g
+        elif best is not None:  # no descent: back to the best point, Adam restarted at half the step
+            p, g = best[1], best_grad
+            state = opt.init(p)
+            scale *= 0.5
+        if ok and loss == 0.0 or it == steps or not np.all(np.isfinite(np.asarray(g))):
+            break
+        upd, state = opt.update(g, state, p)
+        p = optax.apply_updates(p, jax.tree.map(lambda u: scale * u, upd))
+    return best, history, last
 
 
 def remaining_bodies(bodies, run, launched):
@@ -310,7 +339,8 @@ def sequence_speeds(run, targets, **timing):
 @dataclasses.dataclass
 class Fig4Result:
     """`fig4_study`'s three designs (in `FIG4_PROGRAMS` order, each on the balls the ones before
-    it left), the `sequence` run of all three on the finer mesh `n_check` with the three balls,
+    it left, on the mesh `n`), the `sequence` run of all three on the finer mesh `n_check` with
+    the three balls,
     `stage_speeds` (per program: the peak speed of each ball still on the table, v*),
     `confirmed` (in that run each program launched its ball faster than `v_launch` and the
     others stayed below `v_spare`) and `seconds`."""
@@ -319,6 +349,7 @@ class Fig4Result:
     sequence: object
     stage_speeds: list
     confirmed: bool
+    n: int
     n_check: int
     v_launch: float
     v_spare: float
@@ -337,24 +368,24 @@ class Fig4Result:
         return "\n".join(rows)
 
 
-def fig4_study(*, n=16, n_check=24, v_launch=FIG4_V_LAUNCH, v_spare=FIG4_V_SPARE, steps=25, scan_deg=15.0,
+def fig4_study(*, n=FIG4_N, n_check=FIG4_N_CHECK, v_launch=FIG4_V_LAUNCH, v_spare=FIG4_V_SPARE, steps=25, scan_deg=15.0,
                scan_size=7, t1=1.8, hold=(), d_hold=0.005) -> Fig4Result:
     """Design the paper's three programs one after the other, each on the balls the previous
     ones leave (module docstring), and re-check them in one sequence run on the finer mesh.
     `hold`: balls that the programs not aimed at them must also leave within `d_hold` (L) of
     their places (`design_program`'s `d_spare`).
 
-    Measured at the defaults (`benchmarks/results/actuate.md`): A (35, -55) deg and B (-40,
-    65) deg are found by the scan alone and hold in the sequence run at N = 24 (right ball
-    6.65 v*, left 7.55 v*, the others at most 0.65 v*). C is not found: at N = 16, B brushes
-    the centre ball (0.56 v*) and lifts it 0.03 L, out of the reach of every two-knot program
-    (the symmetric snap reaches y = 0.48 L and not 0.49 L), so Adam has no contact to follow;
-    in the sequence run at N = 24, where B leaves the centre ball in place, C's program
-    launches it at 4.26 v*, below `v_launch`. `confirmed` is False. Holding the centre ball
-    in place (`hold=("centre",)`, 0.005 L) keeps it in C's reach (C (90, 90) deg: 5.83 v* at
-    N = 16, 5.40 at N = 24) but leaves B a narrow program, (-41.4, 39.4) deg, 5.52 v* at
-    N = 16, that in the sequence run at N = 24 nudges the left ball (0.87 v*) instead of
-    launching it."""
+    Measured at the defaults (N = 32, re-check N = 48; `benchmarks/results/actuate.md`):
+    A (35, -70) deg launches the right ball at 8.58 v* and touches neither other ball; B,
+    designed on the left and centre balls A left untouched, is its mirror (-70, 35) deg
+    (left ball 8.58 v*, equal to A's to 1e-11); C (75, 120) deg launches the centre ball at
+    9.89 v*. Each is the widest-margin program of the 7 x 7 scan, which meets the goal with
+    the 10 % margin, so Adam takes no step. The sequence run at N = 48: right 7.56, left
+    7.55, centre 8.69 v*, every spared ball at 0.00 v*; `confirmed` is True. Adam alone
+    from the naive starts (`scan_deg=None`) finds A in 7 iterations, (42.9, -47.0) deg, but
+    it brushes the left and centre balls (0.87, 0.93 v*, moving them 0.08 L), and finds
+    neither B nor C: from (-40, 50) and (120, 120) deg the strip misses its ball and the
+    loss is flat."""
     tic = time.perf_counter()
     scene = jr.make_scene(60.0, 0.5, n=n)
     theta0 = jr.initial_state(scene, "down").theta
@@ -376,5 +407,5 @@ def fig4_study(*, n=16, n_check=24, v_launch=FIG4_V_LAUNCH, v_spare=FIG4_V_SPARE
     confirmed = bool(seq.result == jr.RESULTS.successful and len(designs) == len(FIG4_PROGRAMS) and all(
         sp[d.target] >= v_launch and all(v <= v_spare for nm, v in sp.items() if nm != d.target)
         for d, sp in zip(designs, stages)))
-    return Fig4Result(designs=designs, sequence=seq, stage_speeds=stages, confirmed=confirmed, n_check=n_check,
+    return Fig4Result(designs=designs, sequence=seq, stage_speeds=stages, confirmed=confirmed, n=n, n_check=n_check,
                       v_launch=v_launch, v_spare=v_spare, seconds=time.perf_counter() - tic)

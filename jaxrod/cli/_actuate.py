@@ -7,12 +7,12 @@ Fig. 4 sequence: the three programs of `jaxrod.design.FIG4_PEAKS` one after the 
 (`jaxrod.design.sequence_program`, the strip reset down between them) on the three balls,
 and reports per program (`programs`) the peak speed of each ball still on the table, which
 ball it launched (faster than `FIG4_V_LAUNCH`) and whether it spared the others (slower than
-`FIG4_V_SPARE`); exit 3 unless every program launched its own ball and only it.
+`FIG4_V_SPARE`); exit 3 unless every program launched its own ball and only it. The mesh
+is `--n` 24 by default, with paper-fig4 the sequence's re-check mesh `FIG4_N_CHECK` (48).
 `--objects FILE.json` holds the balls and the contact law, `{"balls": [{"name", "x", "y",
 "radius", "mass"}, ...], "stiffness", "thickness", "table": {"deceleration"} | "floor":
 {"height"}}` (only `balls` required);
-without it the three balls of `DEFAULT_OBJECTS` (those of `jaxrod.design.fig4_bodies`) lie on
-a table above the strip. The JSON
+without it the three balls of `jaxrod.design.fig4_bodies` lie on a table above the strip. The JSON
 output has the hits in time order (name, time, impulse, launch speed), the snaps (time,
 kind, from, to, fold), the energy balance's relative error and the result code; exit code 0
 for a successful run, 3 for a flagged one, 2 for bad input.
@@ -26,20 +26,11 @@ import math
 from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, add_scene_args, creases_record, make_scene_from_args,
                     writing)
 
-DEFAULT_OBJECTS = {
-    "balls": [
-        {"name": "left", "x": 0.05, "y": 0.10, "radius": 0.04, "mass": 0.05},
-        {"name": "centre", "x": 0.25, "y": 0.48, "radius": 0.04, "mass": 0.05},
-        {"name": "right", "x": 0.45, "y": 0.10, "radius": 0.04, "mass": 0.05},
-    ],
-    "table": {"deceleration": 5.0},
-}
-
-
 def register(sub):
     p = sub.add_parser("actuate", help="run a clamp program on the strip with balls it strikes: hits, snaps, energy")
     add_scene_args(p)
-    p.set_defaults(n=24)
+    n_opt = p._option_string_actions["--n"]  # the mesh's default depends on --program
+    n_opt.default, n_opt.help = None, "number of segments, even, >= 8 (default 24; 48 with --program paper-fig4)"
     p.add_argument("--program", metavar="FILE.json|paper-fig4", required=True,
                    help='knots {"times": [...], "alpha_left_deg": [...], "alpha_right_deg": [...]} (T, degrees), '
                         "or paper-fig4: the paper's three programs in sequence (jaxrod.design.FIG4_PEAKS)"),
@@ -51,6 +42,8 @@ def register(sub):
                    help="no dissipation (default: jaxrod.ACTUATOR_DAMPING and ACTUATOR_VISCOSITY)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     p.add_argument("--animate", metavar="FILE.gif", default=None, help="write an animated GIF of the run")
+    p.add_argument("--frames", type=int, default=96, metavar="K",
+                   help="frames of the animation, evenly spaced over the run (default %(default)d)")
     p.set_defaults(handler=_cmd_actuate)
 
 
@@ -100,6 +93,9 @@ def _cmd_actuate(args):
     if fig4:
         import jaxrod.design as ds
 
+        if args.n is None:
+            args.n = ds.FIG4_N_CHECK
+
         program = ds.sequence_program(ds.FIG4_PEAKS)
         raw = {"t1": float(program.times[-1]) + 2.0}
     else:
@@ -107,9 +103,18 @@ def _cmd_actuate(args):
     try:
         if not fig4:
             program = jr.Program.from_json(raw)
-        bodies = bodies_from_json(_read_json(args.objects, "objects") if args.objects else DEFAULT_OBJECTS)
+        if args.objects:
+            bodies = bodies_from_json(_read_json(args.objects, "objects"))
+        else:
+            from jaxrod.design import fig4_objects_json
+
+            bodies = bodies_from_json(fig4_objects_json())
     except (ValueError, TypeError) as e:
         raise InputError(str(e)) from None
+    if args.n is None:
+        args.n = 24
+    if args.frames < 2:
+        raise InputError(f"frames: must be an integer >= 2, got {args.frames}")
     state = raw.get("state", "down")
     t1 = args.t1 if args.t1 is not None else raw.get("t1")
     if t1 is not None and not (isinstance(t1, (int, float)) and math.isfinite(t1) and t1 > 0):
@@ -117,7 +122,7 @@ def _cmd_actuate(args):
     scene = make_scene_from_args(args)
     diss = jr.Dissipation() if args.undamped else None
     try:
-        act = jr.actuate(scene, bodies, program, state=state, t1=t1, dissipation=diss)
+        act = jr.actuate(scene, bodies, program, state=state, t1=t1, dissipation=diss, n_frames=args.frames)
     except ValueError as e:
         raise InputError(str(e)) from None
     res = jr.result_name(act.result)
