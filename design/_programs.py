@@ -248,8 +248,7 @@ def design_program(scene, bodies, target, start_deg, *, v_launch=5.0, v_spare=1.
     else:
         loss = float("inf")
     peaks = np.asarray(p)
-    v, moved, code = (np.asarray(x) for x in aux)
-    code = jr.result_name(int(code))
+    v, moved, code = np.asarray(aux[0]), np.asarray(aux[1]), jr.result_name(aux[2])
     speeds = {n: float(v[m]) for m, n in enumerate(names)}
     displaced = {n: float(moved[m]) for m, n in enumerate(names)}
     reached = bool(loss == 0.0)

@@ -321,6 +321,38 @@ def test_descend_undoes_steps_into_a_flat_region():
     assert best[0] == 100.0 and float(best[1][0]) >= 4.0
 
 
+def test_design_program_scan_descent_and_result(monkeypatch, scene):
+    """`design_program`'s plumbing with a stand-in run (the real one is the nightly test
+    below): the scan picks the widest-margin start, the descent reaches the goal, and the
+    result carries the design, its speeds and the re-check's outcome and codes."""
+    import types
+
+    from jaxrod import design
+    from jaxrod.design import _programs
+
+    def toy(scene, bodies, p, theta0, t1, target):  # the right ball at p_L / 5 v*, the others still
+        v = jnp.stack([0.0 * p[0], 0.0 * p[0], p[0] / 5.0])
+        return v, jnp.zeros(3), jnp.zeros(()), jr.RESULTS.successful
+
+    monkeypatch.setattr(_programs, "_speeds_and_code", toy)
+    monkeypatch.setattr(jr, "initial_state", lambda sc, state: types.SimpleNamespace(theta=jnp.zeros(sc.mesh.n)))
+    checked = {}
+
+    def check_run(sc, bodies, program, **kw):
+        checked["n"] = sc.mesh.n
+        return types.SimpleNamespace(peak_speed=jnp.array([0.5, 0.0, 6.0]), ball_position=bodies.position[None],
+                                     result=jr.RESULTS.successful)
+
+    monkeypatch.setattr(jr, "actuate", check_run)
+    d = design.design_program(scene, design.fig4_bodies(), "right", (10.0, 0.0), lr=3.0, steps=30, n_check=24,
+                              scan_deg=15.0, scan_size=3)
+    assert d.history[0] == pytest.approx((5.5 - 5.0) ** 2 / 25.0)  # the scan's best: p_L = 25, 5 v*
+    assert d.reached and d.history[-1] == 0.0 and d.peaks_deg[0] >= 27.5 and d.iterations >= 1
+    assert d.speeds["right"] == pytest.approx(d.peaks_deg[0] / 5.0) and d.displaced == {n: 0.0 for n in d.speeds}
+    assert checked["n"] == 24 and d.confirmed and d.check == {"left": 0.5, "centre": 0.0, "right": 6.0}
+    assert d.codes == ("successful", "successful")
+
+
 @pytest.mark.slow  # ~2 min on 2 cores (the reverse-mode compile of a three-ball run at N = 32); CI checks
 # the program gradient itself against central differences above and the descent on a toy loss
 def test_designed_program_launches_its_target_and_spares_the_others():
