@@ -30,3 +30,6 @@ def test_notebook_06_actuator_programs():
     assert max(v for n, v in contacts if n == "right") > 5.0, out
     assert max(v for n, v in contacts if n != "right") < 1.2, out
     assert "animation: actuator.gif" in out
+    stages = re.findall(r"program ([ABC]): (\w+) ball at (\S+) v\*, the others at most (\S+) v\*", out)
+    assert [(lab, ball) for lab, ball, _, _ in stages] == [("A", "right"), ("B", "left"), ("C", "centre")], out
+    assert all(float(v) >= 5.0 and float(o) <= 1.2 for _, _, v, o in stages), stages
