@@ -56,6 +56,7 @@ from ._programs import FIG4_V_SPARE as FIG4_V_SPARE
 from ._programs import remaining_bodies as remaining_bodies
 from ._programs import SEQUENCE_TIMING as SEQUENCE_TIMING
 from ._programs import sequence_program as sequence_program
+from ._programs import sequence_clearances as sequence_clearances
 from ._programs import sequence_speeds as sequence_speeds
 from ._programs import sequence_windows as sequence_windows
 from ._programs import two_knot_program as two_knot_program

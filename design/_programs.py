@@ -322,17 +322,31 @@ def remaining_bodies(bodies, run, launched):
                      floor=bodies.floor)
 
 
+def _per_window(run, targets, values, reduce, timing):
+    """`reduce` of the samples `values` (n, M) within each program's window, per ball still
+    on the table then (not the target of an earlier program)."""
+    t = np.asarray(run.t)
+    out = []
+    for k, (a, b) in enumerate(sequence_windows(len(targets), **timing)):
+        w = np.isfinite(t) & (t >= a) & (t <= b)
+        out.append({nm: float(reduce(values[w, m])) for m, nm in enumerate(run.names) if nm not in targets[:k]})
+    return out
+
+
 def sequence_speeds(run, targets, **timing):
     """Per program of a sequence run (`targets` in order): each ball's peak speed (v*) within
     the program's window (`sequence_windows`, with its `timing` keywords), for the balls
     still on the table then (not the target of an earlier program)."""
-    t = np.asarray(run.t)
     v = np.hypot(*np.moveaxis(np.asarray(run.ball_velocity), -1, 0))
-    out = []
-    for k, (a, b) in enumerate(sequence_windows(len(targets), **timing)):
-        w = np.isfinite(t) & (t >= a) & (t <= b)
-        out.append({nm: float(np.max(v[w, m])) for m, nm in enumerate(run.names) if nm not in targets[:k]})
-    return out
+    return _per_window(run, targets, v, np.max, timing)
+
+
+def sequence_clearances(run, targets, **timing):
+    """As `sequence_speeds`, each ball's smallest clearance (L) to the strip within the
+    program's window (`Actuation.ball_clearance`: the gap between the ball's surface and the
+    centreline; the contact layer acts below `Bodies.thickness`): by how much a spared ball
+    stayed out of the strip's reach."""
+    return _per_window(run, targets, np.asarray(run.ball_clearance), np.min, timing)
 
 
 @dataclasses.dataclass

@@ -398,8 +398,8 @@ def test_sequence_windows_follow_the_program():
     assert math.degrees(float(aL)) == pytest.approx(-110.0)
 
 
-def _fake_run(names, t, speeds, final_positions, final_speed=0.0):
-    """A run's ball samples (host arrays): speeds (n, M) along x."""
+def _fake_run(names, t, speeds, final_positions, final_speed=0.0, clearance=None):
+    """A run's ball samples (host arrays): speeds (n, M) along x, clearances (n, M) (default 1)."""
     import types
 
     v = np.zeros(speeds.shape + (2,))
@@ -407,7 +407,9 @@ def _fake_run(names, t, speeds, final_positions, final_speed=0.0):
     v[-1, :, 0] = final_speed
     pos = np.zeros_like(v)
     pos[-1] = final_positions
-    return types.SimpleNamespace(names=tuple(names), t=np.asarray(t), ball_velocity=v, ball_position=pos)
+    clear = np.ones(speeds.shape) if clearance is None else np.asarray(clearance, float)
+    return types.SimpleNamespace(names=tuple(names), t=np.asarray(t), ball_velocity=v, ball_position=pos,
+                                 ball_clearance=clear)
 
 
 def test_remaining_balls_and_per_program_speeds():
@@ -429,6 +431,14 @@ def test_remaining_balls_and_per_program_speeds():
                    [0.0, 4.0, 0.0], [99.0, 99.0, 99.0]])
     out = design.sequence_speeds(_fake_run(b.names, t, sp, np.zeros((3, 2))), ["right", "left", "centre"])
     assert out == [{"left": 0.7, "centre": 0.2, "right": 7.0}, {"left": 6.0, "centre": 0.5}, {"centre": 5.5}]
+    # and their smallest clearances, on the same windows
+    cl = 1.0 + sp / 100.0
+    cl[6] = -1.0  # a sample past the end (t = nan) is not in any window
+    out = design.sequence_clearances(_fake_run(b.names, t, sp, np.zeros((3, 2)), clearance=cl),
+                                     ["right", "left", "centre"])
+    want = [{"left": 1.001, "centre": 1.0, "right": 1.05}, {"left": 1.003, "centre": 1.0}, {"centre": 1.04}]
+    assert [list(o) for o in out] == [list(w) for w in want]
+    assert all(o == pytest.approx(w, abs=1e-12) for o, w in zip(out, want))
 
 
 def _fake_actuate(seen, speeds):
@@ -498,12 +508,14 @@ def test_cli_paper_fig4_reports_each_program(monkeypatch, capsys):
     assert [q["launched"] for q in rec["programs"]] == [["right"], ["left"], ["centre"]]
     assert [q["target"] for q in rec["programs"]] == ["right", "left", "centre"]
     assert rec["programs"][1]["peak_speeds"] == {"left": 6.0, "centre": 0.4}
+    assert rec["programs"][1]["min_clearance"] == {"left": 1.0, "centre": 1.0}  # the stand-in's clearances
     assert rec["sequence_confirmed"] is True and rec["result"] == "successful"
     bad = [[0.3, 2.0, 7.0], [0.5, 0.1, 0.0], [6.0, 0.4, 0.0], [0.0, 5.6, 0.0], [0.0, 0.0, 0.0]]  # A knocks the centre ball too
     monkeypatch.setattr(jr, "actuate", fake(bad))
     assert main(["actuate", "--program", "paper-fig4"]) == 3
     out = capsys.readouterr().out
     assert "program A (right): launched right" in out and "sequence_confirmed False" in out
+    assert "; clearance left 1.000, centre 1.000 L" in out
 
 
 @pytest.mark.slow  # the sequence at N = 48 (about 1 min on 2 cores)
@@ -519,6 +531,8 @@ def test_cli_paper_fig4_sequence(capsys):
     assert [q["as_designed"] for q in rec["programs"]] == [True, True, True]
     assert [q["launched"] for q in rec["programs"]] == [["right"], ["left"], ["centre"]]
     assert rec["energy_error"] < 1e-3
+    # the spared balls never enter the contact layer (0.02 L)
+    assert all(v > 0.02 for q in rec["programs"] for nm, v in q["min_clearance"].items() if nm != q["target"])
 
 
 @pytest.mark.slow  # the whole study (about 7 min on 2 cores)

@@ -156,8 +156,10 @@ def _cmd_actuate(args):
         for s in rec["snaps"]:
             print(f"{s['kind']:5s} t = {s['time']:.4f} T  {s['from']} -> {s['to']}  fold {s['fold']}")
         for q in rec.get("programs", []):
+            spared = {k: v for k, v in q["min_clearance"].items() if k != q["target"]}
             print(f"program {q['program']} ({q['target']}): launched {', '.join(q['launched']) or 'nothing'}; "
-                  + ", ".join(f"{k} {v:.2f}" for k, v in q["peak_speeds"].items()) + " v*")
+                  + ", ".join(f"{k} {v:.2f}" for k, v in q["peak_speeds"].items()) + " v*"
+                  + ("; clearance " + ", ".join(f"{k} {v:.3f}" for k, v in spared.items()) + " L" if spared else ""))
         print(f"energy_error {rec['energy_error']:.2e}  result {res}"
               + (f"  sequence_confirmed {rec['sequence_confirmed']}" if fig4 else ""))
     return EXIT_OK if ok else EXIT_NOT_CONVERGED
@@ -165,17 +167,20 @@ def _cmd_actuate(args):
 
 def _fig4_programs(act):
     """Per program of the paper's Fig. 4 sequence: its target, peaks, time window, the peak
-    speed of each ball still on the table, the balls it launched and whether it launched its
-    own ball and spared the others; and whether all three did."""
+    speed and the smallest clearance to the strip (L) of each ball still on the table, the
+    balls it launched and whether it launched its own ball and spared the others; and whether
+    all three did."""
     import jaxrod.design as ds
 
     targets = list(ds.FIG4_PROGRAMS)
     out, confirmed = [], True
+    clear = ds.sequence_clearances(act, targets)
     for k, (sp, win) in enumerate(zip(ds.sequence_speeds(act, targets), ds.sequence_windows(len(targets)))):
         launched = [nm for nm, v in sp.items() if v >= ds.FIG4_V_LAUNCH]
         spared = all(v <= ds.FIG4_V_SPARE for nm, v in sp.items() if nm != targets[k])
         good = launched == [targets[k]] and spared
         confirmed = confirmed and good
         out.append(dict(program="ABC"[k], target=targets[k], peaks_deg=list(ds.FIG4_PEAKS[k]), window=list(win),
-                        peak_speeds=sp, launched=launched, spared_others=spared, as_designed=good))
+                        peak_speeds=sp, min_clearance=clear[k], launched=launched, spared_others=spared,
+                        as_designed=good))
     return out, confirmed
