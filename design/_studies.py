@@ -78,7 +78,8 @@ def snap_angle_study(alpha_up_deg=60.0, alpha_down_deg=-70.0, *, bounds=None, s0
     G/L in (0.05, 0.95); pass e.g. `bounds={"gap": (0.3, 0.95)}`) run on `n_coarse`
     segments; the best is refined on `n` segments (discretization error of alpha_c
     ~ 1000 deg / N^2, so n = 160 is within ~0.04 deg of converged) and checked at `n_check`.
-    `optimizer`: "lm" or an optax transformation (`optimize`, which compares them)."""
+    `optimizer`: "lm" or an optax transformation (`optimize`; benchmarks/results/optimizers.md
+    compares them)."""
     param = Parametrization(free=("psi0_deg", "gap"), bounds=bounds, fixed={"s0": s0})
     z0 = jnp.concatenate([param.from_values(psi0_deg=60.0, gap=0.5)[None],
                           param.sample(jax.random.PRNGKey(seed), max(starts - 1, 0))])

@@ -207,6 +207,30 @@ def test_optax_optimizer_decreases_the_objective():
     assert h[-1] < h[0]
 
 
+def test_studies_hand_their_optimizer_to_optimize(monkeypatch):
+    """Studies (a), (b), (c) run `optimize` with the `optimizer` they are given (a stand-in
+    `optimize` records it and stops the study)."""
+    from jaxrod.design import _studies
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def stub(*args, **kw):
+        seen.append(kw.get("optimizer"))
+        raise Stop
+
+    monkeypatch.setattr(_studies, "optimize", stub)
+    opt = object()
+    for study in (ds.snap_angle_study, ds.snap_speed_study, ds.fastest_snap_study):
+        with pytest.raises(Stop):
+            study(optimizer=opt, progress=False)
+    with pytest.raises(Stop):
+        ds.snap_angle_study(progress=False)
+    assert seen == [opt, opt, opt, "lm"]
+
+
 def test_lm_and_adam_reach_the_same_design():
     """The gap with a given fold height (one free parameter: one design), by Levenberg-Marquardt
     and by Adam on the same compiled problem: both reach it, to the target's tolerance, and LM

@@ -403,8 +403,9 @@ def register(sub):
     p.add_argument("--max-iter", type=int, default=30, help="iterations per start (default %(default)d)")
     p.add_argument("--optimizer", default="lm", metavar="lm|adam[:LR]",
                    help="Levenberg-Marquardt (default) or Adam (optax) with learning rate LR (default 0.05) in "
-                        "the optimizer's unconstrained coordinates; LM needs far fewer iterations on these "
-                        "least-squares targets (benchmarks/results/design.md)")
+                        "the optimizer's unconstrained coordinates; Adam needs 5-40x LM's iterations on these "
+                        "least-squares targets, so raise --max-iter with it, e.g. 200 "
+                        "(benchmarks/results/optimizers.md)")
     p.add_argument("--seed", type=int, default=0, help="random starts seed")
     p.add_argument("--save", metavar="PATH", default=None, help="write PATH.eqx and PATH.json")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
