@@ -25,8 +25,8 @@ ringing that would otherwise make the launch speed wiggle on the scale of 1e-4 r
 (`jaxrod.dynamics._actuate`). It is minimized by Adam (optax) on $p$ in degrees, and the
 design is re-checked by an independent forward run on a finer mesh.
 
-**Steps.** A step that does not lower the loss is undone, and Adam restarts from the best
-program at half the step.
+**Steps** (`descend`). A step that does not lower the loss is undone, and Adam restarts from
+the best program at half the step.
 
 **Start.** The loss is rugged in the peaks (a ball is struck by one part of the strip or
 another, or brushed twice), so with `scan_deg` the optimizer starts from the best of a grid
@@ -40,9 +40,9 @@ other as in the paper: program A turns the left clamp to launch the right ball a
 other two on the table; B, run on the balls A left (where A left them), turns the right clamp
 to launch the left ball and leaves the centre one; C turns both clamps to launch the centre
 ball, the last one on the table. Each is designed on the balls the previous programs leave,
-from a naive start (`FIG4_STARTS`), and the three are re-checked together: one run of the
-whole sequence (`sequence_program`, the strip reset down between programs) on the finer mesh
-with the three balls, in which each program must launch its ball and spare those still on
+from a naive start (`FIG4_STARTS`), on the mesh `FIG4_N`, and the three are re-checked
+together: one run of the whole sequence (`sequence_program`, the strip reset down between
+programs) on the finer mesh `FIG4_N_CHECK` with the three balls, in which each program must launch its ball and spare those still on
 the table (`Fig4Result.confirmed`). `FIG4_PEAKS` holds the designed peaks
 (`jaxrod actuate --program paper-fig4` runs them).
 """
