@@ -59,6 +59,7 @@ from ._programs import sequence_program as sequence_program
 from ._programs import sequence_clearances as sequence_clearances
 from ._programs import sequence_speeds as sequence_speeds
 from ._programs import sequence_windows as sequence_windows
+from ._programs import stage_outcome as stage_outcome
 from ._programs import two_knot_program as two_knot_program
 from ._creases import check_creases as check_creases
 from ._creases import crease_gap_for_speed as crease_gap_for_speed

@@ -349,6 +349,15 @@ def sequence_clearances(run, targets, **timing):
     return _per_window(run, targets, np.asarray(run.ball_clearance), np.min, timing)
 
 
+def stage_outcome(speeds, target, *, v_launch=FIG4_V_LAUNCH, v_spare=FIG4_V_SPARE):
+    """One program of a sequence, from its balls' peak speeds (`sequence_speeds`): the balls it
+    launched (at least `v_launch`), whether it spared the others (none above `v_spare`), and
+    whether it did as designed (its `target` launched and the others spared)."""
+    launched = [nm for nm, v in speeds.items() if v >= v_launch]
+    spared = all(v <= v_spare for nm, v in speeds.items() if nm != target)
+    return launched, spared, speeds[target] >= v_launch and spared
+
+
 @dataclasses.dataclass
 class Fig4Result:
     """`fig4_study`'s three designs (in `FIG4_PROGRAMS` order, each on the balls the ones before
@@ -418,7 +427,6 @@ def fig4_study(*, n=FIG4_N, n_check=FIG4_N_CHECK, v_launch=FIG4_V_LAUNCH, v_spar
                      theta0=jr.initial_state(fine, "down").theta)
     stages = sequence_speeds(seq, [d.target for d in designs])
     confirmed = bool(seq.result == jr.RESULTS.successful and len(designs) == len(FIG4_PROGRAMS) and all(
-        sp[d.target] >= v_launch and all(v <= v_spare for nm, v in sp.items() if nm != d.target)
-        for d, sp in zip(designs, stages)))
+        stage_outcome(sp, d.target, v_launch=v_launch, v_spare=v_spare)[2] for d, sp in zip(designs, stages)))
     return Fig4Result(designs=designs, sequence=seq, stage_speeds=stages, confirmed=confirmed, n=n, n_check=n_check,
                       v_launch=v_launch, v_spare=v_spare, seconds=time.perf_counter() - tic)

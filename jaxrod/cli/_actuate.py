@@ -176,9 +176,7 @@ def _fig4_programs(act):
     out, confirmed = [], True
     clear = ds.sequence_clearances(act, targets)
     for k, (sp, win) in enumerate(zip(ds.sequence_speeds(act, targets), ds.sequence_windows(len(targets)))):
-        launched = [nm for nm, v in sp.items() if v >= ds.FIG4_V_LAUNCH]
-        spared = all(v <= ds.FIG4_V_SPARE for nm, v in sp.items() if nm != targets[k])
-        good = launched == [targets[k]] and spared
+        launched, spared, good = ds.stage_outcome(sp, targets[k])
         confirmed = confirmed and good
         out.append(dict(program="ABC"[k], target=targets[k], peaks_deg=list(ds.FIG4_PEAKS[k]), window=list(win),
                         peak_speeds=sp, min_clearance=clear[k], launched=launched, spared_others=spared,

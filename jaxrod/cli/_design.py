@@ -95,8 +95,9 @@ def _speed_psi0_and_tol(args, default_psi0):
     return psi0, tol
 
 
-def _cmd_design_speed(args):
-    """`--target-speed`: study (c), the gap (and s0 with --free-s0) with v_s = target at --psi0."""
+def _cmd_design_speed(args, optimizer):
+    """`--target-speed`: study (c), the gap (and s0 with --free-s0) with v_s = target at --psi0,
+    by `optimizer` ("lm" or an optax transformation)."""
     angle_targets = (args.target_alpha_up, args.target_alpha_down, args.target_hysteresis)
     if any(t is not None for t in angle_targets):
         raise InputError("target-speed: cannot be combined with angle targets (--target-alpha-up/-down, "
@@ -123,7 +124,6 @@ def _cmd_design_speed(args):
     lo, hi = bounds.get("gap", (0.05, 0.95))
     gaps = [0.5] if starts == 1 else [lo + (hi - lo) * (k + 1) / (starts + 1) for k in range(starts)]
     gaps = [min(max(g, lo + 1e-3), hi - 1e-3) for g in gaps]
-    optimizer = _optimizer(args)
     try:
         res = ds.snap_speed_study(v, psi0, s0=args.s0, free_s0=args.free_s0, bounds=bounds, gaps=gaps, n=n,
                                   n_check=n_check, tol=tol, max_iter=args.max_iter, progress=not args.json,
@@ -263,7 +263,8 @@ def _cmd_design_creases(args):
 
 
 def _cmd_design(args):
-    if args.optimizer.strip().lower() != "lm" and (args.study is not None or args.design_creases):
+    optimizer = _optimizer(args)
+    if optimizer != "lm" and (args.study is not None or args.design_creases):
         raise InputError("optimizer: the crease designs (--study, --crease) run their own optimizers; "
                          "--optimizer is for the angle and snap-speed designs")
     if args.design_creases and (args.study is not None or args.target_speed is None):
@@ -278,7 +279,7 @@ def _cmd_design(args):
     if args.tol is None:
         args.tol = 0.1
     if args.target_speed is not None:
-        return _cmd_design_speed(args)
+        return _cmd_design_speed(args, optimizer)
     if args.psi0 is not None:
         raise InputError("psi0: only used with --target-speed (the angle design optimizes Psi0; "
                          "fix it with --bounds psi0=LO:HI)")
@@ -319,7 +320,6 @@ def _cmd_design(args):
             terms.append(ds.Hysteresis(args.target_hysteresis, tol=args.tol))
     except ValueError as e:
         raise InputError(str(e)) from None
-    optimizer = _optimizer(args)
     z0 = jnp.concatenate([param.from_values()[None], param.sample(jax.random.PRNGKey(args.seed), args.starts - 1)])
     res = ds.optimize(terms, param, z0, n=args.n, max_iter=args.max_iter, progress=not args.json, optimizer=optimizer)
     b = res.best
