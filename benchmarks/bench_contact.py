@@ -112,6 +112,7 @@ def table(psis, gaps, n, progress):
                     rec[f"kind_{d}"] = jr.KIND_NAMES[int(p.kind)]
                     rec[f"result_{d}"] = jr.result_name(p.result)
                     rec[f"clearance_{d}"] = _clear(p, sc, max(n // 10, 2))
+                    rec[f"clicks_{d}"] = int(p.clicks)
                     s = snap_speed_run(sc, d)
                     rec[f"v_s_{d}"] = float(s.v_s)
                     # the trajectory's own peak, also where the critical point was not refined
@@ -243,13 +244,17 @@ def write_md(meta, res, path, suffix):
     for r in res["table"]:
         row = [f"{r['psi0_deg']:g}", f"{r['gap']:g}", "yes" if r["contact"] else "no"]
         for d in ("up", "down"):
-            row += [_f(r[f"alpha_c_{d}_deg"]), f"{r[f'kind_{d}']}, {r[f'result_{d}']}",
+            clicks = r.get(f"clicks_{d}", 0)
+            row += [_f(r[f"alpha_c_{d}_deg"]) + (f" ({clicks} click{'s' if clicks > 1 else ''})" if clicks else ""),
+                    f"{r[f'kind_{d}']}, {r[f'result_{d}']}",
                     _f(r[f"clearance_{d}"], "{:.4f}"),
                     _f(r[f"v_s_{d}"], "{:.2f}") if r[f"v_s_result_{d}"] == "successful"
                     else (f"{_f(r[f'v_s_raw_{d}'], '{:.2f}')}* ({r[f'v_s_result_{d}']})")]
         L.append("| " + " | ".join(row) + " |")
     L += ["", "*: the run's peak fold speed where `snap_speed` gives no value (`derivative_unavailable`: the "
-          "brink at the bisection value of alpha_c, whose extended-system refinement failed).", ""]
+          "brink at the bisection value of alpha_c, whose extended-system refinement failed; `snap_not_resolved`: "
+          "the run's fold never crossed y = 0). Clicks: losses of stability in contact before the snap whose "
+          "landing lay within 0.1 rad and kept the fold on its side (`SnapPath.clicks`; the path continued).", ""]
     ph = res["phase"]
     L += ["", f"## Phase diagram down to G/L = {min(ph['gaps']):g}", "",
           f"{len(ph['psi0_deg'])} x {len(ph['gaps'])} grid: with contact {ph['contact']['seconds']:.0f} s, "

@@ -43,10 +43,10 @@ def test_extrapolation_agrees_with_finer_meshes(psi0, gap):
         assert abs(order - 2.0) < 0.05, order
 
 
-def _fake(snaps, kind, alpha, result=jr.RESULTS.successful, start=jr.RESULTS.successful):
+def _fake(snaps, kind, alpha, result=jr.RESULTS.successful, start=jr.RESULTS.successful, clicks=0):
     return SimpleNamespace(snaps=jnp.asarray(snaps), kind=jnp.asarray(kind), alpha_c=jnp.asarray(alpha),
                            fold_height_before=jnp.asarray(0.1), fold_height_after=jnp.asarray(-0.2),
-                           result=result, start_result=start, refine_result=None)
+                           result=result, start_result=start, refine_result=None, clicks=jnp.asarray(clicks))
 
 
 def test_combination_and_fallback():
@@ -58,6 +58,9 @@ def test_combination_and_fallback():
     e = _combine(_fake(True, 1, 1.0), _fake(True, 2, 1.3))
     assert not bool(e.consistent) and float(e.alpha_c) == 1.3 and abs(float(e.error) - 0.3) < 1e-12
     assert e.result == jr.RESULTS.mesh_inconsistent
+    # with self-contact, a contact click more on one mesh: its snap is another loss of stability
+    e = _combine(_fake(True, 1, 1.0, clicks=1), _fake(True, 1, 1.3))
+    assert not bool(e.consistent) and float(e.alpha_c) == 1.3 and e.result == jr.RESULTS.mesh_inconsistent
     # one mesh snaps, the other does not (near a termination gap): fine mesh's answer, unknown error
     e = _combine(_fake(True, 1, 1.0), _fake(False, 0, jnp.nan))
     assert not bool(e.consistent) and not bool(e.snaps) and np.isnan(float(e.alpha_c)) and np.isnan(float(e.error))

@@ -47,6 +47,31 @@ def test_penalty_vanishes_smoothly_at_the_thickness():
     assert float(d1(d)) == pytest.approx(-k * 0.6**2, rel=1e-12)
 
 
+def test_line_distance_rounded_off_smoothly():
+    """`smooth_abs` equals |s| from eps on and meets it there with equal value, slope and
+    curvature; it is even and smooth at 0. A node crossing the line of a segment half a
+    segment past its end (where the window still acts) feels a continuous force, where
+    |s| would jump it by the penalty's slope times the window."""
+    eps = 1e-3
+    f = lambda s: C.smooth_abs(s, eps)  # noqa: E731
+    d1, d2 = jax.grad(f), jax.grad(jax.grad(f))
+    for s in (eps, -eps, 2 * eps, 0.5):
+        assert float(f(jnp.asarray(s))) == pytest.approx(abs(s), rel=1e-14)
+    for sgn in (1.0, -1.0):
+        lo, hi = jnp.asarray(sgn * eps * (1 - 1e-9)), jnp.asarray(sgn * eps * (1 + 1e-9))
+        assert abs(float(f(lo)) - float(f(hi))) < 3e-9 * eps  # the inputs are 2e-9 eps apart
+        assert float(d1(lo)) == pytest.approx(float(d1(hi)), abs=1e-8)
+        assert abs(float(d2(lo)) - float(d2(hi))) < 1e-5 / eps
+    assert float(d1(jnp.asarray(0.0))) == 0.0 and float(f(jnp.asarray(0.0))) == pytest.approx(0.375 * eps)
+    assert float(f(jnp.asarray(0.3 * eps))) == pytest.approx(float(f(jnp.asarray(-0.3 * eps))), abs=0.0)
+    # node p moving across the line y = 0 of the segment [(0, 0), (1, 0)] at t = -0.42
+    delta, k = 0.01, 1e5
+    grad = jax.grad(lambda y: C._pair_energy(jnp.array([-0.42, y, 0.0, 0.0, 1.0, 0.0]), delta, k))
+    below, above = float(grad(jnp.asarray(-1e-9))), float(grad(jnp.asarray(1e-9)))
+    assert abs(below - above) < 1e-3 * k * float(C.window(jnp.asarray(-0.42)))
+    assert abs(float(grad(jnp.asarray(0.5 * delta)))) > 1.0  # a real force further out
+
+
 def test_no_force_while_clear():
     """A state whose contact pairs are all farther apart than delta feels no contact energy or
     force: results without contact are unchanged wherever the clearance stays above it."""
@@ -254,6 +279,49 @@ def test_snap_angles_with_contact():
     flat = jr.snap_angles(_scene(180.0, 0.1, n=48))
     assert flat.up.result == flat.down.result == jr.RESULTS.successful
     assert float(flat.up.alpha_c) == pytest.approx(-float(flat.down.alpha_c), abs=1e-6)
+
+
+@pytest.mark.slow  # ~3 min: snap_angles and a brink snap compiled with contact
+def test_contact_clicks_are_not_the_snap():
+    """Psi0 = 60 deg, G/L = 0.2, N = 48, snap down with contact: the first losses of
+    stability are clicks (pressed legs slip: a landing within JUMP_DISTANCE, the fold stays
+    up); the snap after them carries the fold through y = 0, and the brink run from it
+    resolves the snap (its fold crosses y = 0; without the click rule the run from the first
+    click never crossed: 0.05 v* peak). The contact-free path reports no clicks."""
+    from jaxrod.branches._snap import JUMP_DISTANCE
+
+    sc = _scene(60.0, 0.2, n=48)
+    r = jr.snap_angles(sc)
+    down = r.down
+    assert down.result == jr.RESULTS.successful and bool(down.snaps)
+    assert int(down.clicks) >= 1 and int(down.stage) >= int(down.clicks)
+    assert float(down.fold_height_before) > 0.0 > float(down.fold_height_after)
+    assert float(down.jump) > JUMP_DISTANCE
+    # every stage before the snap ended at a loss of stability close to the snap's angle
+    stages = jax.tree.map(lambda x: x[: int(down.stage)], down.branch)
+    assert np.all(np.asarray(stages.stop) == 2)
+    for k in range(int(down.stage)):
+        assert np.degrees(float(stages.lam[k, int(stages.count[k]) - 1])) > np.degrees(float(down.alpha_c))
+    run = jr.snap_speed(sc, "down")
+    assert np.isfinite(float(run)) and float(run) > 5.0
+    assert int(jr.snap_angles(_scene(60.0, 0.2, n=48, contact=False)).down.clicks) == 0
+
+
+@pytest.mark.slow  # ~2 min: the CLI's query compiled with contact
+def test_cli_reports_contact_clicks(capsys):
+    """`jaxrod snap-angles` with contact prints each path's clicks before its snap (the
+    same numbers as the API's `SnapPath.clicks`); without contact it prints none."""
+    import json
+
+    args = ["snap-angles", "--psi0", "60", "--gap", "0.2", "--n", "48", "--no-extrapolate", "--json"]
+    _, out, _ = _cli(args + ["--contact-thickness", "0.01"], capsys)
+    rec = json.loads(out)
+    r = jr.snap_angles(_scene(60.0, 0.2, n=48))
+    assert rec["contact"] is True and rec["result_down"] == "successful"
+    assert rec["clicks_down"] == int(r.down.clicks) >= 1 and rec["clicks_up"] == int(r.up.clicks)
+    assert rec["alpha_c_down_deg"] == pytest.approx(np.degrees(float(r.down.alpha_c)), abs=1e-9)
+    _, out, _ = _cli(args + ["--no-contact"], capsys)
+    assert "clicks_down" not in json.loads(out)
 
 
 @pytest.mark.slow  # ~2 min

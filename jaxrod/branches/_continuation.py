@@ -8,7 +8,9 @@ $x=(\theta,\mu)$. Steps follow the branch through turning points:
   $\langle\tau_x, x-x_p\rangle_W + \tau_\lambda(\lambda-\lambda_p)=0$, whose Jacobian
   $\begin{pmatrix}\mathsf K & F_\lambda\\ c^\top & \tau_\lambda\end{pmatrix}$ is solved by
   block elimination on the structured $\mathsf K$ (plus one step of iterative refinement,
-  which keeps it accurate where $\mathsf K$ is nearly singular, at folds);
+  which keeps it accurate where $\mathsf K$ is nearly singular, at folds); a corrected
+  point farther than $|\Delta s|$ from the prediction is rejected like a failed corrector
+  (the step is halved): it jumped to another branch;
 * new tangent from the same bordered matrix with right-hand side $(0, 1)$, which keeps
   the orientation ($\tau_{\rm old}\cdot\tau_{\rm new}>0$).
 
@@ -101,16 +103,32 @@ class Gap(AbstractParameter):
         return eqx.tree_at(lambda s: s.clamps.gap, scene, value)
 
 
+CORRECTOR_STEPS = 8
+CONTACT_CORRECTOR_STEPS = 16
+
+
 class Continuation(eqx.Module):
     """Step control of [`jaxrod.continue_branch`][]: initial, smallest and largest
-    arclength step, buffer size `max_points`, corrector iterations and tolerance."""
+    arclength step, buffer size `max_points`, corrector iterations and tolerance.
+
+    `corrector_steps` None (the default) is 8, or `CONTACT_CORRECTOR_STEPS` = 16 in a scene
+    with self-contact: next to a loss of stability of a state pressed against itself the
+    corrector's Newton iterations converge slowly, and with 8 the step was halved down to
+    `ds_min` before the loss of stability was reached (Psi0 = 60 deg, G/L = 0.075, N = 48,
+    snap down; with 16 it is reached at -79.094 deg). `tol` None is 1e-9 in float64."""
 
     ds: float = eqx.field(static=True, default=0.05)
     ds_min: float = eqx.field(static=True, default=1e-7)
     ds_max: float = eqx.field(static=True, default=0.2)
     max_points: int = eqx.field(static=True, default=400)
-    corrector_steps: int = eqx.field(static=True, default=8)
+    corrector_steps: int | None = eqx.field(static=True, default=None)
     tol: float | None = eqx.field(static=True, default=None)
+
+    def steps_for(self, scene) -> int:
+        """The corrector's iteration limit in `scene` (see the class docstring)."""
+        if self.corrector_steps is not None:
+            return self.corrector_steps
+        return CORRECTOR_STEPS if scene.contact is None else CONTACT_CORRECTOR_STEPS
 
     def __check_init__(self):
         for name in ("ds", "ds_min", "ds_max"):
@@ -118,7 +136,8 @@ class Continuation(eqx.Module):
         if self.ds_min > self.ds_max:
             raise ValueError(f"ds_min must not exceed ds_max, got ds_min={self.ds_min!r}, ds_max={self.ds_max!r}")
         check_int("max_points", self.max_points, lo=2)
-        check_int("corrector_steps", self.corrector_steps, lo=1)
+        if self.corrector_steps is not None:
+            check_int("corrector_steps", self.corrector_steps, lo=1)
         if self.tol is not None:
             check_number("tol", self.tol, lo=0.0)
 
@@ -218,7 +237,9 @@ def _residual_norm(g, scene):
 
 def corrector(scene, parameter, x0, lam0, tau, ds, steps, tol):
     """Predict by `ds` along `tau` from (x0, lam0) and correct. Returns
-    (theta, mu, lam, converged, iterations)."""
+    (theta, mu, lam, converged, iterations); `converged` is False also where the corrected
+    point lies farther than |ds| from the prediction (in the arclength norm): a jump to
+    another branch."""
     F, F_lam, Kf = _pieces(scene, parameter)
     d = discretize(scene)
     w = d.h
@@ -246,7 +267,11 @@ def corrector(scene, parameter, x0, lam0, tau, ds, steps, tol):
         return (~conv) & (k < steps) & finite
 
     t, m, lam, k, conv = lax.while_loop(cond, body, (tp, mp, lp, jnp.zeros((), jnp.int32), jnp.zeros((), bool)))
-    return t, m, lam, conv, k
+    # a correction longer than the step itself left the branch for another one (at Psi0 =
+    # 60 deg, G/L = 0.075 with contact, a step of 0.025 landed 0.42 away, on an unstable
+    # branch 18 deg back): not converged, so the step is halved
+    far = jnp.sqrt(jnp.sum(w * (t - tp) ** 2) + (lam - lp) ** 2) > jnp.abs(ds)
+    return t, m, lam, conv & ~far, k
 
 
 def _count(scene, parameter, t, m, lam):
@@ -282,7 +307,8 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
     - `stop_on_instability`: stop at the first point whose unstable count differs from
       the start's (a snap candidate).
     - `check_contact`: check every point for self-intersection (`Branch.crossing`; one
-      O(N^2) pass per point after the continuation).
+      O(N^2) pass per point after the continuation; with self-contact only the start's,
+      since every later point was checked before it was accepted, see below).
 
     With self-contact (`scene.contact`) a corrected point that passes through itself is
     rejected like a corrector that fails (the step is halved): a step cannot carry the
@@ -335,7 +361,7 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
 
     def body(c):
         t, m, lam, tau, ds = c["t"], c["m"], c["lam"], c["tau"], c["ds"]
-        tn, mn, ln, conv, k = corrector(scene, parameter, (t, m), lam, tau, ds, settings.corrector_steps, tol)
+        tn, mn, ln, conv, k = corrector(scene, parameter, (t, m), lam, tau, ds, settings.steps_for(scene), tol)
         if scene.contact is not None:
             # with self-contact a step must not carry the strip through itself (a penalty
             # cannot undo a crossing): such a point is rejected and the step halved
@@ -366,7 +392,11 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
     out = lax.while_loop(cond, body, init)
     b = out["buf"]
     crossing = None
-    if check_contact:
+    if check_contact and scene.contact is not None:
+        # every later point was checked before it was accepted: only the start is left
+        start = self_intersects(b["theta"][0], scene, force=b["force"][0])
+        crossing = jnp.zeros(M, bool).at[0].set(start)
+    elif check_contact:
         crossing = branch_crossings(b["theta"], b["force"], out["i"], scene)
     return Branch(b["lam"], b["theta"], b["force"], b["tau_lam"], b["num_unstable"], b["fold_height"], b["ds"],
                   out["i"], out["stop"], crossing)

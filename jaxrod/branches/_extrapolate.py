@@ -11,8 +11,9 @@ $$\alpha_R=\alpha_{2N}+\frac{\alpha_{2N}-\alpha_N}{2^2-1},\qquad
 $\varepsilon$ estimating the error of $\alpha_{2N}$ (that of $\alpha_R$ is of higher order:
 about $10^{-3}$ deg at $N=100$, see `tests/test_extrapolate.py`). The same combination is
 applied to the fold heights before and after the snap. Where the two meshes disagree
-(one snaps and the other does not, or the kind differs: near a termination gap or where
-a fold and a branch point cross), nothing is extrapolated: the fine-mesh values are
+(one snaps and the other does not, the kind differs, or, with self-contact, the number of
+contact clicks before the snap: near a termination gap or where a fold and a branch point
+cross), nothing is extrapolated: the fine-mesh values are
 returned with `consistent=False` and the error estimate $|\alpha_{2N}-\alpha_N|$ (NaN
 where one mesh does not snap).
 
@@ -92,7 +93,7 @@ def richardson(coarse, fine, factor: int = 2):
 
 def _combine(c: SnapPath, f: SnapPath) -> ExtrapolatedPath:
     r = 2.0**ORDER - 1.0
-    consistent = (c.snaps == f.snaps) & (c.kind == f.kind)
+    consistent = (c.snaps == f.snaps) & (c.kind == f.kind) & (c.clicks == f.clicks)
     both = consistent & f.snaps
 
     def ex(a, b):

@@ -32,7 +32,7 @@ from jaxtyping import Array
 
 from ..linalg import kkt
 from ._continuation import (Continuation, SymmetricAlpha, _pieces, _tangent, continue_branch, require_float64, corrector)
-from ..energy.contact import self_intersects
+from ..energy.contact import contact_energy, self_intersects
 from ._critical import critical_point
 from ..energy.geometry import discretize
 from ..energy.lagrangian import positions
@@ -62,7 +62,8 @@ class SnapPath(eqx.Module):
     `mode` the critical mode (angle part, unit $L^2$ norm), `jump` the $L^2$ distance of the
     landed angle field from the critical one (rad; NaN if it does not snap), `stage` the
     index of the `branch` stage that decided the path (holds the critical point; the stages
-    before it were supercritical branch points).
+    before it were supercritical branch points or contact clicks), `clicks` the number of
+    contact clicks before it (always 0 without self-contact; see `follow_path`).
 
     `result` is the whole path's code: `successful`, or the start state's code where it does
     not exist, `continuation_incomplete`, `landing_failed`, `self_intersecting` (the
@@ -98,6 +99,7 @@ class SnapPath(eqx.Module):
     refine_result: RESULTS | None = None
     mode: Array | None = None
     stage: Array | None = None
+    clicks: Array | None = None
 
 
 def _fh(scene, parameter, t, m, lam):
@@ -126,7 +128,7 @@ def _refine(scene, parameter, branch, settings, tol, bisections):
     def body(_, c):
         lo, hi, best = c
         s = 0.5 * (lo + hi)
-        t, m, lam, conv, _ = corrector(scene, parameter, (ta, ma), la, tau, s, settings.corrector_steps, tol)
+        t, m, lam, conv, _ = corrector(scene, parameter, (ta, ma), la, tau, s, settings.steps_for(scene), tol)
         nu = kkt.count_below(Kf(t, m, lam), jnp.zeros(1, t.dtype))[0]
         stable_side = conv & (nu == nu_a)
         lo = jnp.where(stable_side, s, lo)
@@ -136,7 +138,7 @@ def _refine(scene, parameter, branch, settings, tol, bisections):
 
     lo, hi, (t, m, lam) = lax.fori_loop(0, bisections, body, (jnp.zeros_like(ds_b), ds_b, (ta, ma, la)))
     # state just past the critical point: its lowest mode tells the kind
-    t2, m2, l2, _, _ = corrector(scene, parameter, (ta, ma), la, tau, hi, settings.corrector_steps, tol)
+    t2, m2, l2, _, _ = corrector(scene, parameter, (ta, ma), la, tau, hi, settings.steps_for(scene), tol)
     K2 = Kf(t2, m2, l2)
     lam_min = kkt.smallest_eigenvalues(K2, 1)
     v = kkt.modes(K2, lam_min)[:, 0]
@@ -204,12 +206,22 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
     ~ sqrt(1e-3) ~ 0.03): no snap yet, and the path continues from that state, up to
     `stages` times. `substituted` (traced bool): the start is the other path's end.
 
+    With self-contact, a loss of stability of a state in contact (contact energy above zero)
+    whose landing lies within `JUMP_DISTANCE` and leaves the fold height $y(L/2)$ on its side
+    is a *click*: pressed parts of the strip slip past each other (at Psi0 = 60 deg,
+    G/L = 0.2, N = 48 the fold height moves by 7e-4 L), the fold does not go through, and
+    the path continues from the landed state as after a supercritical branch point
+    (`SnapPath.clicks` counts them). The snap is the next loss of stability with a larger
+    jump, with the fold going through, or out of contact. (Without contact every fold is a
+    snap however small its jump, which is what ends a path at a cusp, see
+    `jaxrod.termination_gap`.)
+
     A path that reaches the bound without losing stability is a "no snap" only if its
     tangent never all but turned in alpha on the way: a computed point with
     |tau_lam| < `NEAR_FOLD` (next to a cusp, where the fold pair can be shorter than one
     step and lie between two computed points) makes it `fold_unresolved`."""
     def body(c, stage):
-        t0, m0, lam0, ok, done, out = c
+        t0, m0, lam0, ok, done, clicks, out = c
         def run(sc, d, args):
             t0, m0, lam0, ok0 = args
             return _stage(sc, parameter, t0, m0, lam0, ok0, d, settings, bound, bisections, tol)
@@ -228,7 +240,12 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
             br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = run_if(~done, run, skipped, (scene, direction, args))
         w = discretize(scene).h
         dist = jnp.sqrt(jnp.sum(w * (ta - t) ** 2))
-        jumped = snaps & ((dist > JUMP_DISTANCE) | (kind == KIND_FOLD)) & landed
+        if scene.contact is None:
+            click = jnp.zeros((), bool)
+        else:
+            # a small jump of a state in contact after which the fold keeps its side
+            click = (contact_energy(t, scene) > 0) & (jnp.sign(fa) == jnp.sign(fb)) & (dist <= JUMP_DISTANCE)
+        jumped = snaps & ~click & ((dist > JUMP_DISTANCE) | (kind == KIND_FOLD)) & landed
         # the path is decided here if it did not lose stability (bound reached, start
         # missing, or the continuation gave up: `stop` tells which), if it jumped, or if it
         # lost stability but the relaxation past alpha_c found no equilibrium (`landed`
@@ -237,7 +254,8 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
         new_out = (snaps, kind, t, m, lam, fb, ta, ma, fa, br.stop, landed, dist, stage)
         out = jax.tree.map(lambda n, o: jnp.where(final, n, o), new_out, out)
         lam_next = lam + direction * 1e-3
-        nxt = (ta, ma, lam_next, ok & snaps & landed, done | final, out)
+        clicks = clicks + (~done & snaps & landed & click).astype(jnp.int32)
+        nxt = (ta, ma, lam_next, ok & snaps & landed, done | final, clicks, out)
         return nxt, br
 
     dtype = start_eq.theta.dtype
@@ -247,8 +265,9 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
             jnp.full((), stages - 1, jnp.int32))
     lam0 = parameter.get(start_eq.scene)
     ok0 = start_eq.result == RESULTS.successful
-    init = (start_eq.theta, start_eq.force, jnp.asarray(lam0, dtype), ok0, jnp.zeros((), bool), out0)
-    (_, _, _, _, done, out), branches = lax.scan(body, init, jnp.arange(stages, dtype=jnp.int32))
+    init = (start_eq.theta, start_eq.force, jnp.asarray(lam0, dtype), ok0, jnp.zeros((), bool),
+            jnp.zeros((), jnp.int32), out0)
+    (_, _, _, _, done, clicks, out), branches = lax.scan(body, init, jnp.arange(stages, dtype=jnp.int32))
     snaps, kind, t, m, lam, fb, ta, ma, fa, stop, landed, dist, last_stage = out
     snaps = snaps & done
     # decided without a snap, but not at the parameter bound (stop 1): the continuation
@@ -290,6 +309,7 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
         stop=stop,
         jump=jnp.where(snaps & landed, dist, nan),
         stage=last_stage,
+        clicks=clicks,
     )
 
 

@@ -521,7 +521,7 @@ def _snap_arrays(scene, extrapolate):
                         f"alpha_c_{name}_n": e.alpha_c_coarse, f"alpha_c_{name}_n_fine": e.alpha_c_fine,
                         f"error_{name}": e.error, f"consistent_{name}": e.consistent,
                         f"alpha_c2_{name}": a2, f"kind2_{name}": f2.kind2, f"result2_{name}": code(f2.result),
-                        f"clearance_{name}": clearance(p, sc_f)})
+                        f"clearance_{name}": clearance(p, sc_f), f"clicks_{name}": p.clicks})
     else:
         r = jr.snap_angles(scene)
         routes = jr.snap_routes(scene, snap=r)
@@ -532,7 +532,7 @@ def _snap_arrays(scene, extrapolate):
                         f"fold_height_after_{name}": p.fold_height_after,
                         f"start_{name}": code(p.start_result), f"result_{name}": code(p.result),
                         f"alpha_c2_{name}": q.alpha_c2, f"kind2_{name}": q.kind2, f"result2_{name}": code(q.result),
-                        f"clearance_{name}": clearance(p, scene)})
+                        f"clearance_{name}": clearance(p, scene), f"clicks_{name}": p.clicks})
     return out
 
 
@@ -582,6 +582,8 @@ def _cmd_snap_angles(args):
         rec[f"kind2_{name}"] = jr.KIND_NAMES[int(out[f"kind2_{name}"])]
         rec[f"result2_{name}"] = _result_name(out[f"result2_{name}"])
         rec[f"clearance_{name}"] = val(out[f"clearance_{name}"])
+        if rec["contact"]:
+            rec[f"clicks_{name}"] = int(out[f"clicks_{name}"])
         if args.extrapolate:
             rec[f"alpha_c_{name}_deg_n"] = val(out[f"alpha_c_{name}_n"], deg=True)
             rec[f"alpha_c_{name}_deg_n_fine"] = val(out[f"alpha_c_{name}_n_fine"], deg=True)
@@ -611,6 +613,8 @@ def _cmd_snap_angles(args):
                       f"{abs(a2 - a):.3f} deg further")
             if rec[f"clearance_{name}"] is not None:
                 print(f"           clearance {rec[f'clearance_{name}']:.4f} L")
+            if rec.get(f"clicks_{name}"):
+                print(f"           {rec[f'clicks_{name}']} contact click(s) before the snap")
         if rec["contact"]:
             print(f"self-contact modelled (thickness {rec['contact_thickness']:g} L)")
     if failed:
