@@ -51,7 +51,8 @@ def test_line_distance_rounded_off_smoothly():
     """`smooth_abs` equals |s| from eps on and meets it there with equal value, slope and
     curvature; it is even and smooth at 0. A node crossing the line of a segment half a
     segment past its end (where the window still acts) feels a continuous force, where
-    |s| would jump it by the penalty's slope times the window."""
+    |s| would jump it by the penalty's slope times the window; over the segment the
+    penalty acts on the exact distance."""
     eps = 1e-3
     f = lambda s: C.smooth_abs(s, eps)  # noqa: E731
     d1, d2 = jax.grad(f), jax.grad(jax.grad(f))
@@ -70,6 +71,12 @@ def test_line_distance_rounded_off_smoothly():
     below, above = float(grad(jnp.asarray(-1e-9))), float(grad(jnp.asarray(1e-9)))
     assert abs(below - above) < 1e-3 * k * float(C.window(jnp.asarray(-0.42)))
     assert abs(float(grad(jnp.asarray(0.5 * delta)))) > 1.0  # a real force further out
+    # over the segment itself the distance is exact: the full force k (1 - d/delta)^2 however deep
+    inside = jax.grad(lambda y: C._pair_energy(jnp.array([0.5, y, 0.0, 0.0, 1.0, 0.0]), delta, k))
+    for y in (0.5 * delta, 0.05 * delta, 1e-4 * delta):
+        assert float(inside(jnp.asarray(y))) == pytest.approx(-k * (1 - y / delta) ** 2, rel=1e-12)
+    assert float(C.tail(jnp.asarray(0.0))) == float(C.tail(jnp.asarray(1.0))) == 0.0
+    assert float(C.tail(jnp.asarray(-0.5))) == float(C.tail(jnp.asarray(1.5))) == 1.0
 
 
 def test_no_force_while_clear():

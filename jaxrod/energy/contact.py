@@ -53,15 +53,16 @@ cubic penalty $\varphi$ of `jaxrod.Contact`, $d_{pj}$ the distance of node $p$ f
 of segment $j$ and $t_{pj}$ its projection parameter along the segment (0 and 1 at its
 ends), weighted by the smooth window $\psi$ ([`window`][]: 1 at the segment's middle, 1/2
 at its ends, 0 half a segment beyond them), whose values for consecutive segments of a
-straight uniform chain sum to 1. The line distance is rounded off below
-$\epsilon=0.1\,\delta$ ([`smooth_abs`][]): half a segment past a segment's end, where the
-window still acts but the strip has turned away, a node of another part can cross the line
-itself, and $\varphi(|s|)$ has a kink in the signed distance $s$ there ($\varphi'(0)=-k$), a jump
-of the force that stalls Newton's method (at Psi0 = 60 deg, G/L = 0.075, N = 48, a node
-0.42 segments before a segment near the other clamp, with window 0.004, stopped the
-continuation); inside a segment a distance below $0.1\,\delta$ would be a layer squeezed to
-a tenth, and no state of the scenes measured comes close to it. So the energy is twice
-continuously differentiable. The
+straight uniform chain sum to 1. In the window's tails, past a segment's ends, the line
+distance is rounded off below $\epsilon=0.1\,\delta\,$[`tail`][]$(t)$ ([`smooth_abs`][]):
+there the strip has turned away from the segment's line, a node of another part can cross
+the line itself, and $\varphi(|s|)$ has a kink in the signed distance $s$ ($\varphi'(0)=-k$):
+a jump of the force that stalls Newton's method (at Psi0 = 60 deg, G/L = 0.075, N = 48, a
+node 0.42 segments before a segment near the other clamp, with window 0.004, stopped the
+continuation). Over the segment itself the distance is exact, so a node pressed into the
+layer feels the full force $k(1-d/\delta)^2$ however deep (its distance stays positive:
+no step passes it through the segment, see below). So the energy is twice continuously
+differentiable. The
 distance to the closest point of a segment would switch from the line to an end point at
 the segment's ends: a jump of its Hessian, which would make the constrained stiffness jump
 past zero (a loss of stability that no eigenvalue passes through smoothly, to which a
@@ -186,28 +187,39 @@ def window(t):
 
 
 SMOOTHING = 0.1
-r"""Below $\epsilon=$ `SMOOTHING` $\cdot\,\delta$ the line distance is rounded off ([`smooth_abs`][])."""
+r"""In a window's tails the line distance is rounded off below $\epsilon=$ `SMOOTHING` $\cdot\,\delta$
+([`smooth_abs`][], [`tail`][])."""
 
 
 def smooth_abs(s, eps):
     r"""$|s|$ for $|s|\ge\epsilon$, and the even quartic
     $\tfrac38\epsilon+\tfrac34 s^2/\epsilon-\tfrac18 s^4/\epsilon^3$ below, which meets it
-    with equal value and first two derivatives at $|s|=\epsilon$: twice continuously
-    differentiable, and smooth at $s=0$, where $|s|$ has a kink."""
+    with equal value and first two derivatives at $|s|=\epsilon$ (also in $\epsilon$): twice
+    continuously differentiable, and smooth at $s=0$, where $|s|$ has a kink. $|s|$ where
+    $\epsilon=0$."""
     a = jnp.abs(s)
-    q = s / eps
-    return jnp.where(a >= eps, a, eps * (0.375 + q**2 * (0.75 - 0.125 * q**2)))
+    pos = eps > 0
+    e = jnp.where(pos, eps, 1.0)
+    q = s / e
+    return jnp.where(a >= eps, a, e * (0.375 + q**2 * (0.75 - 0.125 * q**2)))
+
+
+def tail(t):
+    r"""0 over the segment, $t\in[0,1]$, rising to 1 half a segment past its ends (C2):
+    $S(-2t)+S(2t-2)$ with the quintic smoothstep $S$."""
+    return _smoothstep(-2.0 * t) + _smoothstep(2.0 * t - 2.0)
 
 
 def _pair_energy(z, thickness, stiffness):
     r"""$\psi(t)\,\varphi(\bar d_\perp)$ of node z[0:2] and the segment [z[2:4], z[4:6]]: $t$
     the node's projection parameter on the segment, $\bar d_\perp$ its distance to the
-    segment's line, rounded off below $\epsilon=0.1\,\delta$ ([`smooth_abs`][])."""
+    segment's line, rounded off below $\epsilon=0.1\,\delta\,$`tail`$(t)$ ([`smooth_abs`][]):
+    exact over the segment itself."""
     p, a, b = z[0:2], z[2:4], z[4:6]
     u = b - a
     l2 = jnp.sum(u**2)
     t = jnp.sum((p - a) * u) / l2
-    d = smooth_abs(_cross(u, p - a) / jnp.sqrt(l2), SMOOTHING * thickness)
+    d = smooth_abs(_cross(u, p - a) / jnp.sqrt(l2), SMOOTHING * thickness * tail(t))
     return window(t) * penalty(d, thickness, stiffness)
 
 
