@@ -4,7 +4,6 @@ stability marks, energy released by each jump, a fold passed and come back, the 
 import json
 import os
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest

@@ -3,7 +3,6 @@ bounded energy error, v_s against the adaptive reference, gradients, bad input. 
 
 import math
 
-import diffrax as dfx
 import jax
 import jax.numpy as jnp
 import numpy as np

@@ -2,7 +2,6 @@ r"""Observables of an equilibrium: shapes, curvature, fold height, energies."""
 
 from __future__ import annotations
 
-import jax.numpy as jnp
 
 from ..energy.bending import curvature as _curvature
 from ..energy.geometry import at_arclength, discretize
