@@ -293,8 +293,7 @@ def test_contact_clicks_are_not_the_snap():
     """Psi0 = 60 deg, G/L = 0.2, N = 48, snap down with contact: the first losses of
     stability are clicks (pressed legs slip: a landing within JUMP_DISTANCE, the fold stays
     up); the snap after them carries the fold through y = 0, and the brink run from it
-    resolves the snap (its fold crosses y = 0; without the click rule the run from the first
-    click never crossed: 0.05 v* peak). The contact-free path reports no clicks."""
+    resolves the snap (its fold crosses y = 0). The contact-free path reports no clicks."""
     from jaxrod.branches._snap import JUMP_DISTANCE
 
     sc = _scene(60.0, 0.2, n=48)

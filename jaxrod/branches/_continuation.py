@@ -112,10 +112,9 @@ class Continuation(eqx.Module):
     arclength step, buffer size `max_points`, corrector iterations and tolerance.
 
     `corrector_steps` None (the default) is 8, or `CONTACT_CORRECTOR_STEPS` = 16 in a scene
-    with self-contact: next to a loss of stability of a state pressed against itself the
-    corrector's Newton iterations converge slowly, and with 8 the step was halved down to
-    `ds_min` before the loss of stability was reached (Psi0 = 60 deg, G/L = 0.075, N = 48,
-    snap down; with 16 it is reached at -79.094 deg). `tol` None is 1e-9 in float64."""
+    with self-contact, where the stiff penalty can slow the corrector's Newton iterations
+    (a corrector that converges sooner stops sooner; at Psi0 = 60 deg, G/L = 0.075, N = 48
+    both limits give the same snap angles). `tol` None is 1e-9 in float64."""
 
     ds: float = eqx.field(static=True, default=0.05)
     ds_min: float = eqx.field(static=True, default=1e-7)
