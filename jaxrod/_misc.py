@@ -2,12 +2,50 @@
 
 from __future__ import annotations
 
+import functools
 import math
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+
+COMPILER_OPTIONS = {
+    "xla_disable_hlo_passes": "while-loop-invariant-code-motion,simplify-while-loops",
+}
+"""XLA options of every jitted entry point of jaxrod (`jit`). The two passes are disabled because
+they are the slowest of XLA's HLO optimizations on jaxrod's programs, which are deep nests of
+small while loops (Newton, continuation, bisection), and they buy nothing measurable at run
+time there: `snap_angles` at N = 100 on a 2-core CPU compiles in 8 s instead of 12 s and runs
+no slower (`benchmarks/bench_compile.py` has the table for every entry point). Loop-invariant
+code motion also hoisted whole inner solves out of the one-pass loops of `run_if`, which then
+ran for every member of a batch."""
+
+
+def _under_trace() -> bool:
+    """Whether a jit or a control-flow primitive is tracing now (its jitted callees are then
+    inlined into the caller's program, which carries the options)."""
+    try:
+        from jax._src.core import unsafe_am_i_under_a_jit
+    except ImportError:  # a JAX without it: no options rather than an error
+        return True
+    return unsafe_am_i_under_a_jit()
+
+
+def jit(fun):
+    """`equinox.filter_jit` with jaxrod's XLA options (`COMPILER_OPTIONS`) where the call
+    compiles a program of its own; inside another jitted function (where JAX allows no
+    options) the plain `equinox.filter_jit`. `.lower` is that of the top-level one."""
+    top = eqx.filter_jit(fun, compiler_options=COMPILER_OPTIONS)
+    nested = eqx.filter_jit(fun)
+
+    @functools.wraps(fun)
+    def wrapper(*args, **kwargs):
+        return (nested if _under_trace() else top)(*args, **kwargs)
+
+    wrapper.lower = top.lower
+    return wrapper
 
 
 def is_concrete(x) -> bool:

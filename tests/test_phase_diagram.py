@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import jaxrod as jr
-from helpers import PHASE_GAPS, PHASE_N, PHASE_PSI, run_sweep_workers
+from helpers import PHASE_GAPS, PHASE_N, PHASE_PSI, count_compiles, run_sweep_workers
 from jaxrod.branches import _phase
 
 
@@ -186,6 +186,17 @@ def test_warm_started_chunk_equals_single_calls(chunks):
     down = jr.initial_state(jr.make_scene(30.0, 0.8, 0.0, n=n), "down")
     assert down.result == jr.RESULTS.state_not_found
     assert int(warm.sel(psi0=30.0, gap=0.8)) == 1 and int(warm.sel(psi0=30.0, gap=0.82)) == 1
+
+
+def test_new_fold_angles_compile_nothing(chunks):
+    """A chunk is one compiled program per grid of gaps and mesh: after the fixture's fold
+    angles, another one runs without a single XLA compilation (a chunk traced afresh for each
+    fold angle would compile the whole `snap_angles` machinery again, ~10 s on 2 cores)."""
+    with count_compiles() as c:
+        ds = jr.phase_diagram([45.0], PHASE_GAPS, n=PHASE_N, batch="scan", progress=False)
+    assert c[0] == 0, f"{c[0]} XLA compilations for a new fold angle"
+    assert ds.attrs["computed_chunks"] == [45.0]
+    assert np.isfinite(ds["alpha_c_up"].sel(psi0=45.0, gap=0.5))
 
 
 def _traced_fake_chunk(psi0, gaps, s0, mesh, settings=None, contact=None):

@@ -36,7 +36,7 @@ from ..energy.geometry import discretize
 from ..energy.contact import self_intersects
 from ..energy.lagrangian import lagrangian_gradient, positions
 from ..statics import float_scene
-from .._misc import check_bool, check_int, check_number, check_sign, is_concrete
+from .._misc import check_bool, check_int, check_number, check_sign, is_concrete, jit
 from ..results import RESULTS
 
 
@@ -291,7 +291,7 @@ def _check_bounds(name, bounds):
         raise ValueError(f"{name} must be (lo, hi) with lo < hi, got {bounds!r}")
 
 
-@eqx.filter_jit
+@jit
 def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), *, direction: float = 1.0,
                     bounds=(-jnp.pi, jnp.pi), settings: Continuation = Continuation(),
                     stop_on_instability: bool = False, check_contact: bool = True) -> Branch:

@@ -53,7 +53,7 @@ from ..linalg import batched
 from ._continuation import AbstractParameter, Gap, SymmetricAlpha
 from ..energy.geometry import discretize
 from ..energy.lagrangian import lagrangian_gradient, positions
-from .._misc import check_int, check_number, is_concrete
+from .._misc import check_int, check_number, is_concrete, jit
 from ..results import RESULTS
 
 
@@ -178,7 +178,7 @@ def extended_jacobian(scene, cp: CriticalPoint, parameter: AbstractParameter = S
     return jax.jacfwd(lambda z: _fold_residual(z, scene, parameter, ell))(z)
 
 
-@eqx.filter_jit
+@jit
 def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: AbstractParameter = SymmetricAlpha(),
                    max_steps: int = 20, tol: float = 1e-12) -> CriticalPoint:
     r"""Refine a critical point of the branch of `scene` under `parameter` by Newton's
@@ -322,7 +322,7 @@ class CuspPoint(eqx.Module):
     result: RESULTS
 
 
-@eqx.filter_jit
+@jit
 def cusp_point(scene, theta, force, alpha, mode, *, parameter: AbstractParameter = SymmetricAlpha(),
                max_steps: int = 30, tol: float = 1e-12) -> CuspPoint:
     r"""The cusp where a pair of folds (under `parameter`) meets as the gap varies: Newton on

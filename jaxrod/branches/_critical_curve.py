@@ -50,7 +50,7 @@ from ._continuation import AbstractParameter, SymmetricAlpha, _check_bounds, req
 from ._critical import (CriticalPoint, CuspPoint, KIND_BRANCH_POINT, _fold_pack, _fold_residual, _fold_unpack, _set_gap, _sym_pack, _sym_residual, _sym_unpack, cusp_point)
 from ..energy.geometry import discretize
 from ..energy.lagrangian import positions
-from .._misc import check_int, check_number
+from .._misc import check_int, check_number, jit
 from ..results import RESULTS
 
 
@@ -140,7 +140,7 @@ def continue_critical(scene, cp: CriticalPoint, *, direction: float = 1.0, gap_b
                               int(kind))
 
 
-@eqx.filter_jit
+@jit
 def _continue_critical(scene, cp, direction, gap_bounds, parameter, ds, ds_min, ds_max, max_points, corrector_steps,
                        tol, kind):
     sg = lax.stop_gradient

@@ -31,7 +31,7 @@ from ._continuation import Continuation, SymmetricAlpha, continue_branch, requir
 from ..energy.lagrangian import energies as _energies
 from ..energy.lagrangian import positions
 from ..statics import float_scene
-from .._misc import check_int, check_number
+from .._misc import check_int, check_number, jit
 from ._snap import SnapAngles, snap_angles
 from ..results import RESULTS
 from ..statics import Equilibrium
@@ -109,7 +109,7 @@ def hysteresis(scene, *, bound: float = jnp.pi, max_unstable: int = 1,
     return _branches(scene, snap, bound, max_unstable, settings)
 
 
-@eqx.filter_jit
+@jit
 def _branches(scene, snap, bound, max_unstable, settings):
     parameter = SymmetricAlpha()
     dtype = jnp.result_type(scene.strip.psi0)

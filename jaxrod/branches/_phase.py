@@ -60,7 +60,7 @@ from jax import lax
 from ._continuation import Continuation, SymmetricAlpha
 from ..statics import float_scene, solve_equilibrium
 from ..statics import initial_state_signed, still_tracked
-from .._misc import check_grid, package_version, run_if as _run_if, run_if_each
+from .._misc import check_grid, package_version, run_if as _run_if, run_if_each, jit
 from ..model import Clamps, Contact, crease_layout, layout_strip, Mesh, Scene
 from ._snap import _snap_angles_from
 from ..results import RESULTS
@@ -96,7 +96,6 @@ def _warm_or_homotopy(scene, sgn, t_prev, m_prev, ok_prev):
     return eqx.combine(eq, static), good
 
 
-@eqx.filter_jit
 def _contact(key):
     """A `Contact` from its `(thickness, stiffness, exclusion)` key, None for None."""
     return None if key is None else Contact(*key)
@@ -115,6 +114,7 @@ def _kw(layout):
     return {"layout": layout} if layout else {}
 
 
+@jit
 def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), contact=None, layout=()):
     """All gaps at one fold angle (rad), one gap after the other (`lax.scan`): the start
     states of each gap by Newton from the previous gap's (homotopy where that fails), then
@@ -163,7 +163,7 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), con
     return lax.scan(one, init, gaps)[1]
 
 
-@eqx.filter_jit
+@jit
 def _grid(psis, gaps, s0, mesh, settings=Continuation(), contact=None, layout=()):
     """All chunks in one call: `vmap` over the fold angles (rad) of `_chunk`."""
     return jax.vmap(lambda p: _chunk(p, gaps, s0, mesh, settings=settings, contact=contact, **_kw(layout)))(psis)

@@ -38,7 +38,7 @@ from jaxtyping import Array
 from ..linalg import kkt
 from ..results import RESULTS
 from ..statics import Equilibrium, float_scene, mode_parity
-from .._misc import check_int, check_number, run_if
+from .._misc import check_int, check_number, run_if, jit
 from ._continuation import Continuation, SymmetricAlpha, continue_branch, require_float64
 from ._critical import critical_point
 from ._snap import KIND_BRANCH_POINT, KIND_FOLD, KIND_NONE, SnapAngles, _fh, _is_mirror_symmetric, _refine, snap_angles
@@ -128,7 +128,7 @@ def _second(scene_d, path, direction, settings, bound, bisections, tol):
                  jnp.abs(alpha2 - path.alpha_c), theta2, force2, fh2, mode2, result)
 
 
-@eqx.filter_jit
+@jit
 def _routes(scene_d, snap, settings, bound, bisections):
     scene = lax.stop_gradient(scene_d)
     dtype = jnp.result_type(scene.strip.psi0)

@@ -38,7 +38,7 @@ from ..energy.geometry import discretize
 from ..energy.lagrangian import positions
 from ..statics import Newton, float_scene, solve_unflagged
 from ..statics import initial_state_signed
-from .._misc import check_bool, check_int, check_number, run_if
+from .._misc import check_bool, check_int, check_number, run_if, jit
 from ..results import RESULTS
 from ..statics import Equilibrium
 from ..statics import mode_parity
@@ -321,7 +321,7 @@ class SnapAngles(eqx.Module):
     down: SnapPath
 
 
-@eqx.filter_jit
+@jit
 def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float = jnp.pi,
                 bisections: int = 24, polish: bool = True, continue_after_snap: bool = True) -> SnapAngles:
     r"""Critical clamp angles $\alpha_{c,\rm up}>0$ and $\alpha_{c,\rm down}<0$ of a scene

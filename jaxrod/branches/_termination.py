@@ -76,7 +76,7 @@ import jax.numpy as jnp
 from jax import lax
 import numpy as np
 
-from .._misc import check_param
+from .._misc import check_param, jit
 from ..model import crease_layout, make_scene
 from ..results import RESULTS, result_name
 
@@ -190,7 +190,7 @@ def _with_fold(base, psi0, gap=None):
     return sc if gap is None else eqx.tree_at(lambda s: s.clamps.gap, sc, gap)
 
 
-@eqx.filter_jit
+@jit
 def _snap_at(base, psi0, gap):
     from ._snap import snap_angles
 
@@ -375,7 +375,7 @@ def _exact_end(r):
         r["result"] = RESULTS.end_not_located
 
 
-@eqx.filter_jit
+@jit
 def _cusp_gap(base, psi0, gap, theta, force, alpha, mode):
     from ._critical import cusp_point
 
@@ -388,7 +388,7 @@ def _cusp_gap(base, psi0, gap, theta, force, alpha, mode):
     return gc, ok, dg
 
 
-@eqx.filter_jit
+@jit
 def _fold_curve(base, psi0, gap, theta, force, alpha, mode):
     """Refine the fold at `gap` and follow it in (G, alpha) to where it turns in G."""
     from ._critical import critical_point
@@ -426,7 +426,7 @@ def _cusp(base, psi, gap, p):
     return dict(cusp=float(gc), dcusp=float(dg))
 
 
-@eqx.filter_jit
+@jit
 def _state_fold_gap(base, psi0, gap, sgn):
     """Where the up (`sgn` +1) or down (-1) state at alpha = 0 ends as the gap grows: a fold
     in G (Moore-Spence system of `jaxrod.critical_point`, the gap as its parameter, from the

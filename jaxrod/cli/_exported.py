@@ -67,6 +67,15 @@ def cache_key(name: str, static, leaves) -> str:
     return h.hexdigest()
 
 
+def _call(exp, leaves):
+    """Run an exported program, compiled with jaxrod's XLA options (`jaxrod._misc.COMPILER_OPTIONS`)."""
+    import jax
+
+    from .._misc import COMPILER_OPTIONS
+
+    return jax.jit(exp.call, compiler_options=COMPILER_OPTIONS)(*leaves)
+
+
 def call(name: str, fn, scene, directory: str | None = None):
     """`fn(scene)` (a pytree of arrays out, e.g. a dict) through an exported program.
 
@@ -95,7 +104,7 @@ def call(name: str, fn, scene, directory: str | None = None):
         try:
             with open(path, "rb") as f:
                 exp = export.deserialize(bytearray(f.read()))
-            return exp.call(*leaves), "loaded"
+            return _call(exp, leaves), "loaded"
         except Exception:  # noqa: BLE001 - a damaged file is replaced below
             pass
     exp = export.export(jax.jit(flat))(*leaves)
@@ -107,4 +116,4 @@ def call(name: str, fn, scene, directory: str | None = None):
         os.replace(tmp, path)  # atomic: a concurrent run reads a whole file or none
     except OSError:
         pass  # an unwritable cache only means exporting again next time
-    return exp.call(*leaves), "exported"
+    return _call(exp, leaves), "exported"

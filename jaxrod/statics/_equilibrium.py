@@ -38,7 +38,7 @@ from ..linalg import kkt
 from ..energy.geometry import discretize, scene_dtype
 from ..energy.contact import step_bound
 from ..energy.lagrangian import lagrangian, lagrangian_gradient
-from .._misc import check_bool, check_int, check_number, run_if
+from .._misc import check_bool, check_int, check_number, run_if, jit
 from ..results import RESULTS
 from ._solution import Equilibrium
 
@@ -290,7 +290,7 @@ def flag_contact(eq):
     return eqx.tree_at(lambda e: e.result, eq, RESULTS.where(bad, RESULTS.self_intersecting, eq.result))
 
 
-@eqx.filter_jit
+@jit
 def solve_equilibrium(scene, theta0, mu0=None, *, solver: Newton = Newton(), throw: bool = False) -> Equilibrium:
     r"""Solve for an equilibrium of `scene` starting from angles `theta0`.
 

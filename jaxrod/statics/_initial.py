@@ -35,7 +35,7 @@ from jax import lax
 from ..energy.geometry import discretize, scene_dtype
 from ..energy.lagrangian import positions
 from ._equilibrium import Newton, float_scene, solve_unflagged, flag_contact
-from .._misc import check_int
+from .._misc import check_int, jit
 from ..results import RESULTS
 from ._solution import Equilibrium
 
@@ -116,7 +116,7 @@ def still_tracked(eq, sgn, theta_prev, scene):
             & (jnp.max(jnp.abs(eq.theta - theta_prev)) < _MAX_STEP_CHANGE))
 
 
-@eqx.filter_jit
+@jit
 def initial_state(scene, state: str = "up", *, steps: int = 24, solver: Newton = Newton()) -> Equilibrium:
     r"""The stable up (`state="up"`, $y(L/2)>0$) or down (`"down"`) equilibrium of
     `scene`, built from the flat buckled strip by homotopy (see the module docstring).

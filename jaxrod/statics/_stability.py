@@ -17,7 +17,7 @@ from jaxtyping import Array
 
 from ..linalg import kkt
 from ..linalg.batched import solve2
-from .._misc import check_int
+from .._misc import check_int, jit
 
 
 class Stability(eqx.Module):
@@ -47,7 +47,7 @@ def mode_parity(modes):
     return jnp.sum(modes * mirrored, axis=0)
 
 
-@eqx.filter_jit
+@jit
 def stability(eq, k: int = 4) -> Stability:
     r"""The `k` smallest eigenvalues of the constrained Hessian at `eq`, their modes and
     parities, and the count of negative eigenvalues. `k`: an integer from 1 to N - 2, the
