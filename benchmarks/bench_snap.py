@@ -455,7 +455,6 @@ def main(argv=None):
 
     # targets
     jr_small = refs[N_SMALL]
-    jr_acc = refs[ns[-1]]
     nv = res["naive"]
     res["targets"].append(dict(name=f"jaxrod vs naive scan at N = {N_SMALL}", **{"pass": nv["pair_ms"] > jr_small["median_ms"]},
                                detail=f"naive {nv['pair_ms']:.0f} ms (error up to {NAIVE_STEP_DEG} deg) vs "

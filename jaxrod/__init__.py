@@ -65,7 +65,7 @@ from .statics import tangent_angles as tangent_angles
 # branches: continuation, critical points, snap angles, termination, phase diagrams
 from .branches import AbstractParameter as AbstractParameter
 from .branches import Branch as Branch
-from .branches import BRANCH_NAMES as HYSTERESIS_BRANCHES
+from .branches import BRANCH_NAMES as HYSTERESIS_BRANCHES  # noqa: F401 - public name
 from .branches import continue_branch as continue_branch
 from .branches import continue_critical as continue_critical
 from .branches import Continuation as Continuation
