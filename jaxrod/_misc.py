@@ -23,26 +23,28 @@ code motion also hoisted whole inner solves out of the one-pass loops of `run_if
 ran for every member of a batch."""
 
 
-def _under_trace() -> bool:
-    """Whether a jit or a control-flow primitive is tracing now (its jitted callees are then
-    inlined into the caller's program, which carries the options)."""
+def _top_level() -> bool:
+    """Whether no JAX transformation is tracing now. Under `jit` or a control-flow primitive
+    a jitted callee is inlined into the caller's program (which carries the options); under
+    an eager `grad` or `vmap`, JAX traces it into a jaxpr too and refuses options there."""
     try:
-        from jax._src.core import unsafe_am_i_under_a_jit
+        from jax._src.core import trace_state_clean
     except ImportError:  # a JAX without it: no options rather than an error
-        return True
-    return unsafe_am_i_under_a_jit()
+        return False
+    return trace_state_clean()
 
 
 def jit(fun):
-    """`equinox.filter_jit` with jaxrod's XLA options (`COMPILER_OPTIONS`) where the call
-    compiles a program of its own; inside another jitted function (where JAX allows no
-    options) the plain `equinox.filter_jit`. `.lower` is that of the top-level one."""
+    """`equinox.filter_jit` with jaxrod's XLA options (`COMPILER_OPTIONS`) where the call is
+    not inside a JAX transformation; inside one (where JAX allows no options) the plain
+    `equinox.filter_jit`, so an eager `jax.grad` or `jax.vmap` of an entry point compiles with
+    XLA's defaults. `.lower` is that of the top-level one."""
     top = eqx.filter_jit(fun, compiler_options=COMPILER_OPTIONS)
     nested = eqx.filter_jit(fun)
 
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):
-        return (nested if _under_trace() else top)(*args, **kwargs)
+        return (top if _top_level() else nested)(*args, **kwargs)
 
     wrapper.lower = top.lower
     return wrapper
