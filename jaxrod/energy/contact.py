@@ -88,7 +88,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._misc import run_if
+from .._misc import run_if, traced_once
 from .geometry import discretize
 
 TOL = 1e-9
@@ -237,6 +237,7 @@ def _node_segment_distances(z):
     return point_segment_distance(z[:, 0:2], z[:, 2:4], z[:, 4:6])
 
 
+@traced_once
 def contact_energy_nodes(x, scene, d=None):
     r"""$E_c$ of node positions `x` (N+1, 2) under `scene.contact` (0 without contact)."""
     if scene.contact is None:
@@ -257,6 +258,7 @@ def inextensible_nodes(theta, d):
     return jnp.concatenate([jnp.zeros((1, 2), e.dtype), jnp.cumsum(e, 0)])
 
 
+@traced_once
 def contact_energy(theta, scene, d=None):
     r"""$E_c$ of the angles `theta` (N,) (inextensible positions; 0 without contact)."""
     if d is None:
@@ -290,6 +292,7 @@ def step_bound(theta, step, scene, d=None, margin=0.9):
     return jnp.clip(jnp.where(jnp.isfinite(tau), tau, 1.0), 0.0, 1.0)
 
 
+@traced_once
 def contact_hessian(theta, scene, d=None):
     r"""$\partial^2E_c/\partial\theta^2$, dense (N, N), by the suffix sums of the module
     docstring from the pairs' Cartesian Hessians.

@@ -45,6 +45,7 @@ import jax.numpy as jnp
 from .bending import bending_energy, turning_angles
 from .contact import contact_energy
 from .geometry import discretize
+from .._misc import traced_once
 
 
 def gravity_weights(scene, d):
@@ -84,6 +85,7 @@ def _segment_data(scene, d):
     return W, jnp.asarray(inv_K, d.h.dtype)
 
 
+@traced_once
 def lagrangian(theta, mu, scene, d=None):
     r"""$\tilde{\mathcal L}(\theta,\mu)$, see the module docstring."""
     if d is None:
@@ -104,6 +106,7 @@ def _segment_derivatives(theta, mu, d, W, inv_K):
     return a, a_t, c, s, d.h * (1.0 - inv_K * a)
 
 
+@traced_once
 def lagrangian_gradient(theta, mu, scene, d=None):
     r"""$(\partial_\theta\tilde{\mathcal L},\partial_\mu\tilde{\mathcal L})$, shapes (N,)
     and (2,): the equilibrium residual (formulas in the module docstring)."""
@@ -119,6 +122,7 @@ def lagrangian_gradient(theta, mu, scene, d=None):
     return g_theta, g_mu
 
 
+@traced_once
 def hessian_blocks(theta, mu, scene, d=None):
     r"""The Hessian of $\tilde{\mathcal L}$ as (lower, diag, upper, border, corner),
     assembled per stencil: the bending part is the constant tridiagonal matrix
