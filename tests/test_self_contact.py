@@ -261,33 +261,8 @@ def test_undamped_run_with_contact_conserves_energy(pressed):
     assert np.all(ec[np.isfinite(ec)] > 0.0) and np.ptp(ec) > 0.1 * ec[0]  # in contact throughout, working
 
 
-# ------------------------------------------------------------------ snap paths, phase diagram, CLI (nightly)
-@pytest.mark.slow  # ~2 min: snap_angles compiled with contact
-def test_snap_angles_with_contact():
-    """N = 48. Psi0 = 60 deg, G/L = 0.3: the up path stays clear of itself and is unchanged
-    by contact to 1e-9 deg; Psi0 = 60 deg, G/L = 0.2: the contact-free paths pass through
-    themselves (flagged), with contact both snap, successful, and no reported state crosses;
-    the flat strip at G/L = 0.1 snaps symmetrically (alpha_c_down = -alpha_c_up)."""
-    m = 5
-    free = jr.snap_angles(_scene(60.0, 0.3, n=48, contact=False))
-    with_c = jr.snap_angles(_scene(60.0, 0.3, n=48))
-    assert free.up.result == with_c.up.result == jr.RESULTS.successful
-    assert float(jr.clearance(free.up.theta_before, _scene(60.0, 0.3, n=48), min_separation=m)) > 0.01
-    assert abs(np.degrees(float(free.up.alpha_c - with_c.up.alpha_c))) < 1e-9
-    sc = _scene(60.0, 0.2, n=48)
-    free = jr.snap_angles(_scene(60.0, 0.2, n=48, contact=False))
-    r = jr.snap_angles(sc)
-    assert jr.RESULTS.self_intersecting in (free.up.result, free.down.result)
-    for p in (r.up, r.down):
-        assert p.result == jr.RESULTS.successful, jr.RESULTS[p.result]
-        assert bool(p.snaps)
-        for th in (p.theta_before, p.theta_after):
-            assert not np_crossings(np.asarray(C.inextensible_nodes(th, jr.discretize(sc))))
-    flat = jr.snap_angles(_scene(180.0, 0.1, n=48))
-    assert flat.up.result == flat.down.result == jr.RESULTS.successful
-    assert float(flat.up.alpha_c) == pytest.approx(-float(flat.down.alpha_c), abs=1e-6)
-
-
+# ------------------------------------------------------------------ brink, phase diagram, CLI (nightly; the snap
+# paths themselves are checked in CI by test_contact_paths.py)
 @pytest.mark.slow  # ~3 min: snap_angles and a brink snap compiled with contact
 def test_contact_clicks_are_not_the_snap():
     """Psi0 = 60 deg, G/L = 0.2, N = 48, snap down with contact: the first losses of
