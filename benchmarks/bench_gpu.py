@@ -26,6 +26,9 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--max-batch", type=int, default=16384)
     ap.add_argument("--max-batch-snap", type=int, default=4096, help="largest batch of brink snaps")
+    ap.add_argument("--batches", default="", help="comma-separated snap-angle batch sizes (default: 1, 4, 16, "
+                    "then doubling up to --max-batch); each size is a program of its own to compile")
+    ap.add_argument("--snap-batches", default="", help="likewise for the brink snaps (up to --max-batch-snap)")
     ap.add_argument("--n", type=int, default=100)
     ap.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "results"))
     args = ap.parse_args()
@@ -64,9 +67,18 @@ def main():
 
     rng = np.random.default_rng(0)
     rows = []
-    for what, fn, top in (("snap_angles", angles, args.max_batch), ("brink_snap", snap, args.max_batch_snap)):
-        b = 1
+    def sizes(given, top):
+        if given:
+            return [int(b) for b in given.split(",")]
+        out, b = [], 1
         while b <= top:
+            out.append(b)
+            b *= 4 if b < 16 else 2
+        return out
+
+    for what, fn, batches in (("snap_angles", angles, sizes(args.batches, args.max_batch)),
+                              ("brink_snap", snap, sizes(args.snap_batches, args.max_batch_snap))):
+        for b in batches:
             per = -(-b // D)
             sm = jr.ShardedMap(fn, per_device=per)
             pts = {"psi0": rng.uniform(30.0, 180.0, sm.size), "gap": rng.uniform(0.3, 0.8, sm.size)}
@@ -86,7 +98,6 @@ def main():
                              successful=float(np.mean(codes == 0)), codes=dict(zip(names.tolist(), counts.tolist())),
                              peak_memory_bytes=peak_memory()))
             print(rows[-1], flush=True)
-            b *= 4 if b < 16 else 2
     out = dict(benchmark="bench_gpu", date=datetime.date.today().isoformat(), backend=jax.default_backend(),
                devices=[d.device_kind for d in devices], machine=platform.machine(), n=args.n, rows=rows)
     os.makedirs(args.out, exist_ok=True)

@@ -65,7 +65,6 @@ import numpy as np
 from jax import lax
 
 import jaxrod as jr
-from jaxrod._misc import jit
 from jaxrod.branches import AbstractParameter, Continuation, LeftAlpha
 from jaxrod.branches import critical_point
 from jaxrod.energy.lagrangian import positions
@@ -128,7 +127,7 @@ MOVE_SETTINGS = Continuation(ds_max=0.05, max_points=600)
 OVERSHOOT = 0.5  # rad: the continuation runs this far past the end of a move (see `_segment`)
 
 
-@jit
+@eqx.filter_jit
 def _segment(scene, theta, force, a0, a1, settings):
     """Follow the branch through (theta, force) at angles a0 toward a1 until stability changes
     (then refine and land, as `jr.snap_angles` does). The continuation runs `OVERSHOOT` past
@@ -266,7 +265,7 @@ def run_program(scene, waypoints_deg, *, settings=MOVE_SETTINGS):
 
 # ----- one-sided critical angles, differentiable ----------------------------------------
 
-@jit
+@eqx.filter_jit
 def _one_sided(scene, theta, force, direction, parameter, settings):
     """Bisection (as `jr.snap_angles`) then the extended-system refinement of the first loss
     of stability of the branch through (theta, force) when `parameter` (LeftAlpha or
@@ -321,7 +320,7 @@ def _margin_tools(psi0_deg, gap, s0, n, margin_deg, settings):
         _, aux = f(x)
         return vec(x), aux["snaps"]
 
-    return jit(prim), jit(jax.jacfwd(vec))
+    return eqx.filter_jit(prim), eqx.filter_jit(jax.jacfwd(vec))
 
 
 @dataclasses.dataclass

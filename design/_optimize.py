@@ -32,7 +32,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxrod as jr
-from jaxrod._misc import jit
 from jaxrod.results import result_from_name, result_name
 
 from ._objectives import evaluate_terms, term_key, term_numbers
@@ -90,7 +89,7 @@ class Problem(eqx.Module):
         return r, J, v, c
 
 
-@jit
+@eqx.filter_jit
 def _linearize_batch(problem, z, batch_size=None):
     """(r, J, values, codes) of every start: the one compiled call per iteration. `batch_size`
     None: one `vmap` over all starts; an int: `lax.map` over chunks of that many starts,
@@ -144,7 +143,7 @@ def _reached(problem, values, frac):
         return np.all(np.abs(values - targets) <= frac * tols, axis=-1)
 
 
-@jit
+@eqx.filter_jit
 def _optax_update(optimizer, g, opt_state, z):
     return jax.vmap(optimizer.update)(g, opt_state, z)
 

@@ -14,7 +14,7 @@ import numpy as np
 COMPILER_OPTIONS = {
     "xla_disable_hlo_passes": "while-loop-invariant-code-motion,simplify-while-loops",
 }
-"""XLA options of every jitted entry point of jaxrod (`jit`). The two passes are disabled because
+"""XLA options of every jitted entry point of jaxrod on the CPU (`jit`). The two passes are disabled because
 they are the slowest of XLA's HLO optimizations on jaxrod's programs, which are deep nests of
 small while loops (Newton, continuation, bisection), and they buy nothing measurable at run
 time there: `snap_angles` at N = 100 on a 2-core CPU compiles in 8 s instead of 12 s and runs
@@ -34,19 +34,28 @@ def _top_level() -> bool:
     return trace_state_clean()
 
 
+def compiler_options() -> dict:
+    """`COMPILER_OPTIONS` where JAX's default backend is the CPU (where they were measured),
+    XLA's defaults on accelerators."""
+    return COMPILER_OPTIONS if jax.default_backend() == "cpu" else {}
+
+
 def jit(fun):
-    """`equinox.filter_jit` with jaxrod's XLA options (`COMPILER_OPTIONS`) where the call is
+    """`equinox.filter_jit` with jaxrod's XLA options (`compiler_options()`) where the call is
     not inside a JAX transformation; inside one (where JAX allows no options) the plain
     `equinox.filter_jit`, so an eager `jax.grad` or `jax.vmap` of an entry point compiles with
-    XLA's defaults. `.lower` is that of the top-level one."""
-    top = eqx.filter_jit(fun, compiler_options=COMPILER_OPTIONS)
-    nested = eqx.filter_jit(fun)
+    XLA's defaults. `.lower` picks the same way."""
+    with_options = eqx.filter_jit(fun, compiler_options=COMPILER_OPTIONS)
+    plain = eqx.filter_jit(fun)
+
+    def pick():
+        return with_options if _top_level() and compiler_options() else plain
 
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):
-        return (top if _top_level() else nested)(*args, **kwargs)
+        return pick()(*args, **kwargs)
 
-    wrapper.lower = top.lower
+    wrapper.lower = lambda *args, **kwargs: pick().lower(*args, **kwargs)
     return wrapper
 
 

@@ -68,12 +68,12 @@ def cache_key(name: str, static, leaves) -> str:
 
 
 def _call(exp, leaves):
-    """Run an exported program, compiled with jaxrod's XLA options (`jaxrod._misc.COMPILER_OPTIONS`)."""
+    """Run an exported program, compiled with jaxrod's XLA options (`jaxrod._misc.compiler_options`)."""
     import jax
 
-    from .._misc import COMPILER_OPTIONS
+    from .._misc import compiler_options
 
-    return jax.jit(exp.call, compiler_options=COMPILER_OPTIONS)(*leaves)
+    return jax.jit(exp.call, compiler_options=compiler_options())(*leaves)
 
 
 def call(name: str, fn, scene, directory: str | None = None):

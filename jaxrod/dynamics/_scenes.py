@@ -35,7 +35,7 @@ from ..energy.geometry import discretize
 from ..statics import solve_equilibrium
 from ..statics import initial_state
 from ..linalg.batched import solve2
-from .._misc import check_param, jit
+from .._misc import check_param
 from ..branches import snap_angles, snap_routes
 from ..results import RESULTS
 from ..statics import stability
@@ -76,7 +76,7 @@ class Start(eqx.Module):
     ok: jax.Array
 
 
-@jit
+@eqx.filter_jit
 def project(theta, scene, steps=8):
     r"""Minimal-norm Gauss-Newton projection onto $\sum_i h_i\mathbf t_i=(G,0)$ (jitted: an
     eager `fori_loop` over a fresh closure would compile again on every call)."""

@@ -100,7 +100,7 @@ import jax.numpy as jnp
 from ._equations import Protocol
 from ._scenes import NUDGE, _direction, nudge_start
 from ._simulate import FIXED_STEP, SOLVERS, _rattle_dt_natural, simulate
-from .._misc import check_param, jit
+from .._misc import check_param
 from ..branches import snap_angles
 from ..results import RESULTS
 
@@ -279,7 +279,7 @@ def snap_speed(scene, direction="up", *, nudge=NUDGE, past=1e-3, dt=None, t1=2.0
     return _speed_jit(scene, opts)
 
 
-@jit
+@eqx.filter_jit
 def _speed_jit(scene, opts):
     return _speed(scene, opts=opts)
 
@@ -291,6 +291,6 @@ def snap_speed_run(scene, direction="up", *, nudge=NUDGE, past=1e-3, dt=None, t1
     return _run_jit(scene, opts)
 
 
-@jit
+@eqx.filter_jit
 def _run_jit(scene, opts):
     return _run(scene, *opts)

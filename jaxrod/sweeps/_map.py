@@ -32,8 +32,6 @@ import numpy as np
 import jax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
-from .._misc import COMPILER_OPTIONS
-
 MODES = ("shard_map", "sharding")
 
 
@@ -98,11 +96,9 @@ class ShardedMap:
         batched = jax.vmap(fn, in_axes=(0, None))
         if mode == "shard_map":
             self._fn = jax.jit(jax.shard_map(batched, mesh=self.mesh, in_specs=(P("batch"), P()),
-                                             out_specs=P("batch"), check_vma=False),
-                               compiler_options=COMPILER_OPTIONS)
+                                             out_specs=P("batch"), check_vma=False))
         else:
-            self._fn = jax.jit(batched, in_shardings=(self._batch, self._replicated), out_shardings=self._batch,
-                               compiler_options=COMPILER_OPTIONS)
+            self._fn = jax.jit(batched, in_shardings=(self._batch, self._replicated), out_shardings=self._batch)
 
     def device_ids(self) -> np.ndarray:
         """The id of the device that runs each of the `size` members of a batch."""
