@@ -26,7 +26,7 @@ s0 = 0.02 L, N = 100, float64):
   first call (eager operations count: each is a small program of its own); the record
   durations give XLA's compile time (summed), the lowering time (summed) and the tracing
   time (union of the intervals, since nested jits are traced inside their caller).
-* For the entry points that are themselves jitted (`equinox.filter_jit`: `initial_state`,
+* For the entry points that are themselves jitted (`jaxrod._misc.jit`, an `equinox.filter_jit` with XLA options: `initial_state`,
   `solve_equilibrium`, `stability`, `snap_angles`) and cheap (first call under `--aot-below`,
   default 15 s; `--aot-below 0` turns it off), a second fresh process times the ahead-of-time
   path: `f.lower(...)` (trace + lowering), `.compile()` (XLA), and a call of the compiled
@@ -465,7 +465,7 @@ def _markdown(res):
               + " to compile in the processes of this run that compile it (the same function and arguments; the "
               "processes differ only in what else ran on the cores at the time)."]
     if aot:
-        L += ["", "Ahead of time, for the entry points that are jitted themselves (`equinox.filter_jit`) and whose "
+        L += ["", "Ahead of time, for the entry points that are jitted themselves (`jaxrod._misc.jit`, an `equinox.filter_jit` with XLA options) and whose "
               f"first call took under {meta['aot_below_s']:g} s, each in another fresh process: `f.lower(*args)` "
               "(trace + lowering), `.compile()` (XLA), the compiled executable's first and steady (median of 3) "
               "run.", "",
