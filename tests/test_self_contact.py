@@ -92,10 +92,21 @@ def test_no_force_while_clear():
 
 @pytest.mark.parametrize("thickness", [0.01, 0.3])
 def test_hessian_against_autodiff(thickness, pressed):
-    """The suffix-sum Hessian equals autodiff's, both with few pairs in contact (the closest
-    K are assembled) and with more than K (all are)."""
+    """The suffix-sum Hessian equals autodiff's, both with few pairs that can interact (the
+    pressed strip: they are gathered into the K slots) and with more than K (a crumpled
+    strip with a thick contact layer: all pairs are assembled)."""
     sc = _scene(thickness=thickness, stiffness=10.0)
-    th = _angles(0) if thickness > 0.1 else pressed.theta
+    th = _angles(0, scale=2.0) if thickness > 0.1 else pressed.theta
+    d = jr.discretize(sc)
+    p, j = C.contact_pairs(sc)
+    z = C._pair_coordinates(C.inextensible_nodes(th, d), p, j)
+    mask = C._may_interact(z, thickness)
+    live = int(jnp.sum(mask))
+    # the pairs left out have no energy (nor, with it, gradient or Hessian)
+    e = jax.vmap(C._pair_energy, (0, None, None))(z, thickness, 10.0)
+    assert float(jnp.max(jnp.abs(jnp.where(mask, 0.0, e)))) == 0.0 and float(jnp.max(e)) > 0.0
+    K = max(64, 2 * N)
+    assert (live > K) if thickness > 0.1 else (0 < live <= K), live
     H1 = jax.hessian(C.contact_energy)(th, sc)
     H2 = C.contact_hessian(th, sc)
     assert float(jnp.max(jnp.abs(H1))) > 0.0

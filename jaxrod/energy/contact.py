@@ -232,6 +232,18 @@ def _pair_coordinates(x, p, j):
     return jnp.concatenate([x[p], x[j], x[j + 1]], -1)  # (P, 6)
 
 
+def _may_interact(z, thickness):
+    """Whether each pair's energy (`_pair_energy`) can be nonzero, (P,): the node within the
+    segment's window ($-\tfrac12<t<\tfrac32$) and closer than the thickness to its line (the
+    rounded distance is never below the exact one)."""
+    pt, a, b = z[:, 0:2], z[:, 2:4], z[:, 4:6]
+    u = b - a
+    l2 = jnp.sum(u**2, -1)
+    t = jnp.sum((pt - a) * u, -1) / l2
+    s = _cross(u, pt - a) / jnp.sqrt(l2)
+    return (t > -0.5) & (t < 1.5) & (jnp.abs(s) < thickness)
+
+
 def _node_segment_distances(z):
     """Distance from node z[:, 0:2] to the closest point of segment [z[:, 2:4], z[:, 4:6]], (P,)."""
     return point_segment_distance(z[:, 0:2], z[:, 2:4], z[:, 4:6])
@@ -297,9 +309,11 @@ def contact_hessian(theta, scene, d=None):
     r"""$\partial^2E_c/\partial\theta^2$, dense (N, N), by the suffix sums of the module
     docstring from the pairs' Cartesian Hessians.
 
-    Only pairs closer than the thickness contribute: the $K=\max(64,2N)$ closest pairs are
-    assembled (`lax.top_k` on the distances), and all of them in the rare state with more
-    than $K$ pairs in contact."""
+    Only pairs whose energy can be nonzero contribute (`_may_interact`: the node within the
+    segment's window and closer than the thickness to its line): up to $K=\max(64,2N)$ of
+    them are gathered into fixed slots and assembled, all pairs in the rare state with more
+    than $K$. The contact gradient in the node coordinates (the diagonal term) is assembled
+    from the same pairs."""
     if d is None:
         d = discretize(scene)
     N = theta.shape[0]
@@ -309,27 +323,38 @@ def contact_hessian(theta, scene, d=None):
     w = _voronoi(d)[p]
     z = _pair_coordinates(x, p, j)
     hess = jax.vmap(jax.hessian(_pair_energy), (0, None, None))
+    grad = jax.vmap(jax.grad(_pair_energy), (0, None, None))
     nodes = np.stack([p, j, j + 1], -1)  # (P, 3)
     idx = (2 * nodes[:, :, None] + np.arange(2)).reshape(-1, 6)  # node-coordinate indices
     idx = jnp.asarray(idx)
 
-    def assemble(sel):
-        Hp = hess(z[sel], c.thickness, c.stiffness) * w[sel][:, None, None]
-        ii = idx[sel]
-        return jnp.zeros((2 * (N + 1), 2 * (N + 1)), x.dtype).at[ii[:, :, None], ii[:, None, :]].add(Hp)
+    def assemble(sel, used=None):
+        # the pairs `sel` (where `used`): their Hessians and gradients in the node coordinates
+        zs, ws, ii = z[sel], w[sel], idx[sel]
+        if used is not None:
+            ws = jnp.where(used, ws, 0.0)
+        Hp = hess(zs, c.thickness, c.stiffness) * ws[:, None, None]
+        gp = grad(zs, c.thickness, c.stiffness) * ws[:, None]
+        Hx = jnp.zeros((2 * (N + 1), 2 * (N + 1)), x.dtype).at[ii[:, :, None], ii[:, None, :]].add(Hp)
+        return Hx, jnp.zeros(2 * (N + 1), x.dtype).at[ii].add(gp)
 
     K = min(max(64, 2 * N), p.size)
     if K < p.size:
-        dist = _node_segment_distances(z)
-        near = jax.lax.top_k(-dist, K)[1]
-        many = jnp.sum(dist < c.thickness) > K
-        Hx = jax.lax.cond(many, lambda: assemble(jnp.arange(p.size)), lambda: assemble(near))
+        # the pairs whose energy can be nonzero (the others have zero energy, gradient and
+        # Hessian), compacted into K slots: O(P), where a top-K selection by distance sorted
+        # all P pairs (2.2 of the contact Hessian's 4.9 ms at N = 100); all P pairs in the rare
+        # state with more than K of them
+        live = _may_interact(z, c.thickness)
+        count = jnp.sum(live)
+        sel = jnp.nonzero(live, size=K, fill_value=0)[0]
+        Hx, gx = jax.lax.cond(count > K, lambda: assemble(jnp.arange(p.size)),
+                              lambda: assemble(sel, jnp.arange(K) < count))
     else:
-        Hx = assemble(jnp.arange(p.size))
+        Hx, gx = assemble(jnp.arange(p.size))
     Hx = Hx.reshape(N + 1, 2, N + 1, 2)
+    gx = gx.reshape(N + 1, 2)
     S = jnp.flip(jnp.cumsum(jnp.flip(Hx, (0, 2)), 0), (0, 2))
     S = jnp.flip(jnp.cumsum(jnp.flip(S, 2), 2), 2)[1:, :, 1:, :]  # (N, 2, N, 2)
-    gx = jax.grad(contact_energy_nodes)(x, scene, d)
     G = jnp.flip(jnp.cumsum(jnp.flip(gx, 0), 0), 0)[1:]  # (N, 2)
     hn = d.h[:, None] * jnp.stack([-jnp.sin(theta), jnp.cos(theta)], -1)
     ht = d.h[:, None] * jnp.stack([jnp.cos(theta), jnp.sin(theta)], -1)
