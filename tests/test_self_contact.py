@@ -275,28 +275,15 @@ def test_undamped_run_with_contact_conserves_energy(pressed):
 # ------------------------------------------------------------------ brink, phase diagram, CLI (nightly; the snap
 # paths themselves are checked in CI by test_contact_paths.py)
 @pytest.mark.slow  # ~3 min: snap_angles and a brink snap compiled with contact
-def test_contact_clicks_are_not_the_snap():
-    """Psi0 = 60 deg, G/L = 0.2, N = 48, snap down with contact: the first losses of
-    stability are clicks (pressed legs slip: a landing within JUMP_DISTANCE, the fold stays
-    up); the snap after them carries the fold through y = 0, and the brink run from it
-    resolves the snap (its fold crosses y = 0). The contact-free path reports no clicks."""
-    from jaxrod.branches._snap import JUMP_DISTANCE
-
+def test_brink_snap_after_contact_clicks():
+    """Psi0 = 60 deg, G/L = 0.2, N = 48, snap down with contact: the path clicks before it
+    snaps (`test_contact_paths.py` checks the path in CI), and the brink run from the snap's
+    critical state resolves the snap (`jr.snap_speed` finite, its fold through y = 0)."""
     sc = _scene(60.0, 0.2, n=48)
-    r = jr.snap_angles(sc)
-    down = r.down
-    assert down.result == jr.RESULTS.successful and bool(down.snaps)
-    assert int(down.clicks) >= 1 and int(down.stage) >= int(down.clicks)
-    assert float(down.fold_height_before) > 0.0 > float(down.fold_height_after)
-    assert float(down.jump) > JUMP_DISTANCE
-    # every stage before the snap ended at a loss of stability close to the snap's angle
-    stages = jax.tree.map(lambda x: x[: int(down.stage)], down.branch)
-    assert np.all(np.asarray(stages.stop) == 2)
-    for k in range(int(down.stage)):
-        assert np.degrees(float(stages.lam[k, int(stages.count[k]) - 1])) > np.degrees(float(down.alpha_c))
+    down = jr.snap_angles(sc).down
+    assert down.result == jr.RESULTS.successful and int(down.clicks) >= 1
     run = jr.snap_speed(sc, "down")
     assert np.isfinite(float(run)) and float(run) > 5.0
-    assert int(jr.snap_angles(_scene(60.0, 0.2, n=48, contact=False)).down.clicks) == 0
 
 
 @pytest.mark.slow  # ~2 min: the CLI's query compiled with contact
