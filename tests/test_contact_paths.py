@@ -1,5 +1,6 @@
-"""Snap paths with self-contact, in CI: `snap_angles` on scenes with `jaxrod.Contact` at
-N = 48, against the contact-free paths.
+"""Snap paths with self-contact (nightly: 1.5-3 min on 2 cores, most of it compiling the
+contact program): `snap_angles` on scenes with `jaxrod.Contact` at N = 48, against the
+contact-free paths.
 
 The contact program is compiled ahead of time at XLA's default back-end level: the suite
 compiles everything else at -O0 (conftest.py), where this program compiles no faster
@@ -17,6 +18,8 @@ from jaxrod.energy import contact as C
 from helpers import np_crossings
 
 N = 48
+
+pytestmark = pytest.mark.slow
 
 
 def _scene(psi0, gap, contact=True):
