@@ -215,12 +215,19 @@ def _pair_energy(z, thickness, stiffness):
     the node's projection parameter on the segment, $\bar d_\perp$ its distance to the
     segment's line, rounded off below $\epsilon=0.1\,\delta\,$`tail`$(t)$ ([`smooth_abs`][]):
     exact over the segment itself."""
-    p, a, b = z[0:2], z[2:4], z[4:6]
-    u = b - a
-    l2 = jnp.sum(u**2)
-    t = jnp.sum((p - a) * u) / l2
-    d = smooth_abs(_cross(u, p - a) / jnp.sqrt(l2), SMOOTHING * thickness * tail(t))
+    t, s = _line_coordinates(z)
+    d = smooth_abs(s, SMOOTHING * thickness * tail(t))
     return window(t) * penalty(d, thickness, stiffness)
+
+
+def _line_coordinates(z):
+    """`(t, s)` of node z[..., 0:2] and the segment [z[..., 2:4], z[..., 4:6]]: the node's
+    projection parameter along the segment (0 and 1 at its ends) and its signed distance to
+    the segment's line."""
+    p, a, b = z[..., 0:2], z[..., 2:4], z[..., 4:6]
+    u = b - a
+    l2 = jnp.sum(u**2, -1)
+    return jnp.sum((p - a) * u, -1) / l2, _cross(u, p - a) / jnp.sqrt(l2)
 
 
 def _voronoi(d):
@@ -236,11 +243,7 @@ def _may_interact(z, thickness):
     """Whether each pair's energy (`_pair_energy`) can be nonzero, (P,): the node within the
     segment's window ($-\tfrac12<t<\tfrac32$) and closer than the thickness to its line (the
     rounded distance is never below the exact one)."""
-    pt, a, b = z[:, 0:2], z[:, 2:4], z[:, 4:6]
-    u = b - a
-    l2 = jnp.sum(u**2, -1)
-    t = jnp.sum((pt - a) * u, -1) / l2
-    s = _cross(u, pt - a) / jnp.sqrt(l2)
+    t, s = _line_coordinates(z)
     return (t > -0.5) & (t < 1.5) & (jnp.abs(s) < thickness)
 
 
