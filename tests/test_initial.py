@@ -12,11 +12,9 @@ from jaxrod.statics._equilibrium import Newton
 
 @jax.jit
 def path_validity(scene, sgn):
-    """Whether each of the three deformation paths reaches a valid state."""
+    """Whether each of the three deformation paths, tried alone, reaches a valid state."""
     scene = _initial.float_scene(scene)
-    eq0, ok0 = _initial._flat_start(scene, sgn, Newton())
-    us = jnp.arange(1, 25, dtype=scene.strip.psi0.dtype) / 24
-    return jnp.stack([_initial._run_path(scene, sgn, k, eq0, ok0, us, Newton())[2] for k in range(3)])
+    return jnp.stack([_initial._homotopy(scene, sgn, 24, Newton(), kinds=(k,))[1] for k in range(3)])
 
 
 def test_state_only_the_last_path_reaches():
@@ -27,11 +25,10 @@ def test_state_only_the_last_path_reaches():
     eq = jr.initial_state(sc, "down")
     assert eq.result == jr.RESULTS.successful
     assert bool(eq.stable) and float(jr.fold_height(eq)) < 0
-    # and the same state as the third path's end, polished
-    eq0, ok0 = _initial._flat_start(_initial.float_scene(sc), -1.0, Newton())
-    t, m, _ = _initial._run_path(_initial.float_scene(sc), -1.0, 2, eq0, ok0,
-                                 jnp.arange(1, 25, dtype=jnp.float64) / 24, Newton())
-    np.testing.assert_allclose(eq.theta, t, atol=1e-6)
+    # and the same state as the third path tried alone: the two lost paths leave no trace
+    eq3, found = _initial._homotopy(_initial.float_scene(sc), -1.0, 24, Newton(), kinds=(2,))
+    assert bool(found)
+    np.testing.assert_allclose(eq.theta, eq3.theta, atol=1e-10)
 
 
 def test_no_path_gives_state_not_found():

@@ -125,20 +125,24 @@ def _refine(scene, parameter, branch, settings, tol, bisections):
     tau = jax.tree.map(lambda v: sgn * v, tau)
     ds_b = branch.ds[i]
 
-    def body(_, c):
-        lo, hi, best = c
-        s = 0.5 * (lo + hi)
+    # `bisections` halvings, then one more pass that corrects at `hi`, the state just past
+    # the critical point (whose lowest mode tells the kind): one corrector call site
+    def body(k, c):
+        lo, hi, best, after = c
+        last = k == bisections
+        s = jnp.where(last, hi, 0.5 * (lo + hi))
         t, m, lam, conv, _ = corrector(scene, parameter, (ta, ma), la, tau, s, settings.steps_for(scene), tol)
         nu = kkt.count_below(Kf(t, m, lam), jnp.zeros(1, t.dtype))[0]
-        stable_side = conv & (nu == nu_a)
+        stable_side = conv & (nu == nu_a) & ~last
         lo = jnp.where(stable_side, s, lo)
         hi = jnp.where(stable_side, hi, s)
         best = jax.tree.map(lambda new, old: jnp.where(stable_side, new, old), (t, m, lam), best)
-        return lo, hi, best
+        after = jax.tree.map(lambda new, old: jnp.where(last, new, old), (t, m, lam), after)
+        return lo, hi, best, after
 
-    lo, hi, (t, m, lam) = lax.fori_loop(0, bisections, body, (jnp.zeros_like(ds_b), ds_b, (ta, ma, la)))
-    # state just past the critical point: its lowest mode tells the kind
-    t2, m2, l2, _, _ = corrector(scene, parameter, (ta, ma), la, tau, hi, settings.steps_for(scene), tol)
+    start = (ta, ma, la)
+    lo, hi, (t, m, lam), (t2, m2, l2) = lax.fori_loop(0, bisections + 1, body,
+                                                      (jnp.zeros_like(ds_b), ds_b, start, start))
     K2 = Kf(t2, m2, l2)
     lam_min = kkt.smallest_eigenvalues(K2, 1)
     v = kkt.modes(K2, lam_min)[:, 0]
@@ -377,22 +381,23 @@ def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, cont
     # The two paths run one after the other through a single traced body (one compiled
     # copy of the continuation, refinement and landing): first snap down from the up
     # state, then snap up from the down state; where the down state does not exist at
-    # alpha = 0, snap up starts from the state the snap-down half of the loop reached
-    # (its landing state, or the end of its branch if it did not snap).
+    # alpha = 0, snap up starts from the state the snap-down half of the loop reached: its
+    # landing state (an equilibrium at alpha_c - 1e-3, relaxed by the landing), or the last
+    # point of its branch if it did not snap (a converged continuation point). Both are
+    # equilibria already, so they start the path as they are.
     def body(prev, direction):
-        # prev: what the snap-down path left for the snap-up start (see below)
-        lam_end, t_end, m_end, down_snaps, down_alpha, t_after, m_after = prev
-
-        def up_start(scene, lam_end, t_end, m_end, down_snaps, down_alpha, t_after, m_after):
-            alt_eq = solve_unflagged(parameter.set(scene, lam_end), t_end, m_end, Newton())
-            land_eq = solve_unflagged(parameter.set(scene, down_alpha - 1e-3), t_after, m_after, Newton())
-            return jax.tree.map(lambda c, b: jnp.where(down_snaps, c, b), arrays(land_eq), arrays(alt_eq))
-
+        lam_end, t_end, m_end, end_ok, down_snaps, down_alpha, t_after, m_after = prev
         has_down = down_eq.result == RESULTS.successful
         need_alt = (direction > 0) & ~has_down
-        alt = run_if(need_alt, up_start, arrays(down_eq), (scene,) + prev)  # not lax.cond: see `run_if`
+        landed = jnp.all(jnp.isfinite(t_after))
+        alt_ok = jnp.where(down_snaps, landed, end_ok)
+        alt = Equilibrium(jnp.where(down_snaps, t_after, t_end), jnp.where(down_snaps, m_after, m_end),
+                          RESULTS.where(alt_ok, RESULTS.successful,
+                                        RESULTS.where(down_snaps, RESULTS.landing_failed, up_eq.result)),
+                          jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32),
+                          parameter.set(scene, jnp.where(down_snaps, down_alpha - 1e-3, lam_end)))
         start = jax.tree.map(lambda u, d, a: jnp.where(direction < 0, u, jnp.where(has_down, d, a)),
-                             arrays(up_eq), arrays(down_eq), alt)
+                             arrays(up_eq), arrays(down_eq), arrays(alt))
         # with self-contact, legs pressed together mirror-symmetrically break the symmetry at
         # branch points of their own (supercritical: more stages before the snap)
         stages = 2 if scene.contact is None else CONTACT_STAGES
@@ -400,14 +405,15 @@ def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, cont
                            stages=stages, continue_after_snap=continue_after_snap, substituted=need_alt)
         br = jax.tree.map(lambda x: x[0], path.branch)  # first stage
         last = br.count - 1
-        nxt = (br.lam[last], br.theta[last], br.force[last], path.snaps, path.alpha_c, path.theta_after,
+        end_ok = (last >= 0) & (path.start_result == RESULTS.successful)
+        nxt = (br.lam[last], br.theta[last], br.force[last], end_ok, path.snaps, path.alpha_c, path.theta_after,
                path.force_after)
         return nxt, (_polish(scene_d, path, parameter) if polish else path)
 
     N = scene.mesh.n
     z = jnp.zeros((), dtype)
-    init = (z, jnp.zeros(N, dtype), jnp.zeros(2, dtype), jnp.zeros((), bool), z, jnp.zeros(N, dtype),
-            jnp.zeros(2, dtype))
+    init = (z, jnp.zeros(N, dtype), jnp.zeros(2, dtype), jnp.zeros((), bool), jnp.zeros((), bool), z,
+            jnp.zeros(N, dtype), jnp.zeros(2, dtype))
     _, paths = lax.scan(body, init, jnp.array([-1.0, 1.0], dtype))
     return SnapAngles(up=pick(paths, 1), down=pick(paths, 0))
 

@@ -34,7 +34,7 @@ from jax import lax
 
 from ..energy.geometry import discretize, scene_dtype
 from ..energy.lagrangian import positions
-from ._equilibrium import Newton, float_scene, solve_unflagged, flag_contact
+from ._equilibrium import Newton, _implicit, float_scene, solve_unflagged, flag_contact
 from .._misc import check_int, jit
 from ..results import RESULTS
 from ._solution import Equilibrium
@@ -133,29 +133,77 @@ def initial_state(scene, state: str = "up", *, steps: int = 24, solver: Newton =
     return flag_contact(initial_state_signed(scene, 1.0 if state == "up" else -1.0, steps=steps, solver=solver))
 
 
-def _flat_start(target, sgn, solver):
-    """The flat strip buckled to the side `sgn` at the target's gap, relaxed: `(equilibrium,
-    valid)`; shared by the three deformation paths."""
+_FLAT, _PATH, _FINAL, _DONE = 0, 1, 2, 3
+"""Phases of `_homotopy`'s loop: the flat start, a step of a deformation path, the polish on
+the target scene, finished."""
+
+
+def _tree_where(pred, a, b):
+    return jax.tree.map(lambda x, y: jnp.where(pred, x, y), a, b)
+
+
+def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2)):
+    """The homotopy of `initial_state` on the (gradient-free) `target` scene: the flat start,
+    then the deformation paths `kinds` (0 all together, 1 crease first, 2 clamps first) in
+    turn, each abandoned at its first step that loses the tracked state, then the polish on
+    the target from the end of the first valid path (or of the last one tried).
+
+    Every Newton solve of the homotopy runs at one call site, in one loop whose phase picks
+    the scene and the guess: compiled once instead of once per phase (the program of
+    `snap_angles` spent a quarter of its kernels on three copies of the Newton solve here).
+
+    Returns `(eq, found)`: the polished equilibrium (scene `target`) and whether a path was
+    valid."""
     dtype = scene_dtype(target)
-    s0 = _deformed(_with_gap(target, jnp.zeros((), dtype)), jnp.zeros((), dtype), jnp.zeros((), dtype))
-    eq0 = solve_unflagged(s0, sgn * buckled_guess(s0, True), None, solver)
-    ok0 = eq0.converged & eq0.stable & (sgn * _fold_height(eq0.theta, eq0.force, s0) > 0)
-    return eq0, ok0
+    kinds = jnp.asarray(kinds, jnp.int32)
+    zero = jnp.zeros((), dtype)
+    flat = _deformed(_with_gap(target, zero), zero, zero)
+    guess = sgn * buckled_guess(flat, True)
+    seed = 0.0 if target.contact is None else CONTACT_SEED
+    arrays, static = eqx.partition(target, eqx.is_array)
 
-
-def _run_path(target, sgn, kind, eq0, ok0, us, solver):
-    """Deformation path `kind` (0 all together, 1 crease first, 2 clamps first) from the
-    flat start through the homotopy times `us`: `(theta, force, valid)`."""
-    def step(carry, u):
-        t, m, ok = carry
+    def scene_at(phase, kind, step):
+        u = jnp.where(phase == _FLAT, 0.0, (step + 1).astype(dtype) / steps)
         uc, ua = _path_params(kind, u)
-        sc = _deformed(_with_gap(target, u), uc, ua)
-        seed = 0.0 if target.contact is None else CONTACT_SEED
-        eq = solve_unflagged(sc, t + seed, m, solver)
-        return (eq.theta, eq.force, ok & still_tracked(eq, sgn, t, sc)), None
+        deformed = eqx.filter(_deformed(_with_gap(target, u), uc, ua), eqx.is_array)
+        return eqx.combine(_tree_where(phase == _FINAL, arrays, deformed), static)
 
-    (t, m, ok), _ = lax.scan(step, (eq0.theta, eq0.force, ok0), us)
-    return t, m, ok
+    def body(c):
+        phase, k, step, t, m, ok, found, t0, m0, ok0, out = c
+        sc = scene_at(phase, kinds[jnp.minimum(k, kinds.shape[0] - 1)], step)
+        t_in = jnp.where(phase == _FLAT, guess, jnp.where(phase == _PATH, t + seed, t))
+        m_in = jnp.where(phase == _FLAT, jnp.zeros_like(m), m)
+        eq = solve_unflagged(sc, t_in, m_in, solver)
+        good = eq.converged & eq.stable & (sgn * _fold_height(eq.theta, eq.force, sc) > 0)
+        # flat start: valid -> the first path from it; else nothing to deform: polish
+        after_flat = (jnp.where(good, _PATH, _FINAL), k, jnp.zeros_like(step), eq.theta, eq.force, good, found,
+                      eq.theta, eq.force, good)
+        # path step: still tracked -> next step, or the polish after the last one; lost ->
+        # the next path from the flat start, or the polish if none is left
+        tracked = ok & good & (jnp.max(jnp.abs(eq.theta - t)) < _MAX_STEP_CHANGE)
+        last = step + 1 == steps
+        more = k + 1 < kinds.shape[0]
+        lost = ~tracked & more
+        after_path = (jnp.where(tracked, jnp.where(last, _FINAL, _PATH), jnp.where(more, _PATH, _FINAL)),
+                      jnp.where(tracked, k, k + 1), jnp.where(tracked, step + 1, 0),
+                      jnp.where(lost, t0, eq.theta), jnp.where(lost, m0, eq.force), jnp.where(lost, ok0, tracked),
+                      tracked & last, t0, m0, ok0)
+        head = _tree_where(phase == _FLAT, after_flat, after_path)
+        head = _tree_where(phase == _FINAL, (_DONE,) + c[1:10], head)
+        out = _tree_where(phase == _FINAL, eqx.filter(eq, eqx.is_array), out)
+        new = head + (out,)
+        # finished members of a batch (under `vmap`) keep their state
+        return _tree_where(phase == _DONE, c, new)
+
+    shapes, eq_static = eqx.partition(jax.eval_shape(lambda: solve_unflagged(target, guess, None, solver)),
+                                      lambda x: isinstance(x, jax.ShapeDtypeStruct))
+    out0 = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+    i0 = jnp.zeros((), jnp.int32)
+    f0 = jnp.zeros((), bool)
+    t_init, m_init = guess, jnp.zeros(2, dtype)
+    c = lax.while_loop(lambda c: c[0] != _DONE, body,
+                       (i0 + _FLAT, i0, i0, t_init, m_init, f0, f0, t_init, m_init, f0, out0))
+    return eqx.combine(c[-1], eq_static), c[6]
 
 
 def _finite(tree):
@@ -174,25 +222,10 @@ def initial_state_signed(scene, sgn, *, steps: int = 24, solver: Newton = Newton
     sgn = jnp.asarray(sgn, dtype)
     target = lax.stop_gradient(scene)
 
-    eq0, ok0 = _flat_start(target, sgn, solver)
-    us = jnp.arange(1, steps + 1, dtype=dtype) / steps
-
-    # the paths one after another until one is valid: the first valid one in the order
-    # (all together, crease first, clamps first), as if all three ran, at a third of the
-    # work where the first succeeds (under `vmap` the loop runs until every member has one)
-    def cond(c):
-        kind, _, _, found = c
-        return (kind < 3) & ~found
-
-    def body(c):
-        kind, _, _, _ = c
-        t, m, ok = _run_path(target, sgn, kind, eq0, ok0, us, solver)
-        return kind + 1, t, m, ok
-
-    _, t_best, m_best, found = lax.while_loop(
-        cond, body, (jnp.zeros((), jnp.int32), eq0.theta, eq0.force, jnp.zeros((), bool)))
-    # final polish on the target scene (also attaches implicit derivatives)
-    eq = solve_unflagged(scene, t_best, m_best, solver)
+    polished, found = _homotopy(target, sgn, steps, solver)
+    # the derivatives of the polished state (implicit function theorem, as `solve_equilibrium`)
+    t, m = _implicit(polished.theta, polished.force, scene)
+    eq = Equilibrium(t, m, polished.result, polished.num_steps, polished.num_unstable, scene)
     good = eq.converged & eq.stable & (sgn * _fold_height(eq.theta, eq.force, eq.scene) > 0)
     result = RESULTS.where(found & good, eq.result,
                            RESULTS.where(eq.converged | ~found, RESULTS.state_not_found, eq.result))
