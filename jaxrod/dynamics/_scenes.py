@@ -32,13 +32,13 @@ import jax.numpy as jnp
 
 from ._equations import Protocol, check_run_settings
 from ..energy.geometry import discretize
-from ..statics import solve_equilibrium
 from ..statics import initial_state
+from ..linalg import kkt
 from ..linalg.batched import solve2
 from .._misc import check_param
 from ..branches import snap_angles, snap_routes
 from ..results import RESULTS
-from ..statics import stability
+from ..energy.lagrangian import energies as _energies
 
 
 NUDGE = 0.03
@@ -124,29 +124,37 @@ def brink(scene, direction="up", *, nudge=NUDGE, past=1e-3, snap=None, route="fi
         raise ValueError(f"direction: the quasi-static {direction} path of this scene does not snap "
                          "(jr.snap_angles found no loss of stability), so there is no brink")
     if route == "first":
-        alpha_c, theta_c, force_c, exists = path.alpha_c, path.theta_before, path.force_before, path.snaps
+        alpha_c, theta_c, force_c, mode, exists = (path.alpha_c, path.theta_before, path.force_before, path.mode,
+                                                   path.snaps)
     else:
         r = snap_routes(scene, snap=snap)
         r = r.up if sgn > 0 else r.down
         if is_concrete(r.kind2) and int(r.kind2) == 0:
             raise ValueError(f"route: the {direction} path of this scene has no second critical point "
                              "(jr.snap_routes: it snaps at a fold, or its branch reaches the bound)")
-        alpha_c, theta_c, force_c, exists = r.alpha_c2, r.theta2, r.force2, r.kind2 != 0
-    a = alpha_c + sgn * past
-    sc = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (alpha_c, alpha_c))
-    eq = solve_equilibrium(sc, theta_c, force_c)
-    if route == "first":
-        mode = stability(eq, k=1).modes[:, 0]
-        solved = eq.result == RESULTS.successful
-    else:
-        mode = r.mode2
-        # past the first critical point the branch is unstable: the second one is a saddle
-        solved = (eq.result == RESULTS.successful) | (eq.result == RESULTS.converged_to_saddle)
-    sc_run = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (a, a))
-    theta0 = nudge_start(eq.theta, mode, sc_run, sgn, nudge)
-    from ..statics import bending_energy
+        alpha_c, theta_c, force_c, mode, exists = r.alpha_c2, r.theta2, r.force2, r.mode2, r.kind2 != 0
+    dtype = jnp.result_type(float)
+    return _brink_start(scene, alpha_c, theta_c, force_c, mode, exists, sgn, jnp.asarray(past, dtype),
+                        jnp.asarray(nudge, dtype))
 
-    return Start(sc_run, theta0, Protocol(a, a), sgn, alpha_c, bending_energy(eq), exists & solved)
+
+@eqx.filter_jit
+def _brink_start(scene, alpha_c, theta_c, force_c, mode, exists, sgn, past, nudge):
+    """The brink's start from a refined critical state (`theta_c`, `force_c` at `alpha_c`,
+    with its critical `mode`), as one compiled program. The state is used as it is: solving
+    it again at `alpha_c` would add nothing to its value, and the implicit derivative of a
+    solve at a critical point divides by the Hessian's vanishing eigenvalue, where the
+    critical point's own refinement (`jaxrod.critical_point`) carries the right one."""
+    a = alpha_c + sgn * past
+    sc_c = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (alpha_c, alpha_c))
+    sc_run = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (a, a))
+    if mode is None:  # a `snap` computed without the polish carries no mode: the lowest one
+        K = kkt.structured(theta_c, force_c, sc_c)
+        mode = kkt.modes(K, kkt.smallest_eigenvalues(K, 1))[:, 0]
+    theta0 = nudge_start(theta_c, mode, sc_run, sgn, nudge)
+    ok = exists & jnp.all(jnp.isfinite(theta_c)) & jnp.all(jnp.isfinite(mode))
+    bending = _energies(theta_c, force_c, sc_c)["bending"]
+    return Start(sc_run, theta0, Protocol(a, a), sgn, alpha_c, bending, ok)
 
 
 def ramp(scene, direction="up", *, rate=0.5, alpha_start=None, right_only=False, snap=None,
