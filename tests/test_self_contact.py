@@ -192,6 +192,28 @@ def test_step_bound_never_crosses(pressed, seed):
         assert not far, (s, far)
 
 
+def test_landing_push_never_crosses():
+    """The push that starts a landing after a loss of stability (`_land`: 0.05 rad along the
+    unstable mode) is bounded like a Newton step. The flat strip pressed at G/L = 0.1 with a
+    thin contact (0.005 L): the full push that turns the two halves of the strip against
+    each other carries the legs through each other; `_land`, which picks the push's side by
+    the fold height (both sides tried here), starts and ends clear of itself."""
+    from jaxrod.branches._snap import _land
+    from jaxrod.branches._continuation import SymmetricAlpha
+    from jaxrod.statics import Newton
+
+    eq = jr.initial_state(_scene(thickness=0.005), "up")
+    assert eq.result == jr.RESULTS.successful
+    sc, d = eq.scene, jr.discretize(eq.scene)
+    v = jnp.where(jnp.arange(N) < N // 2, 1.0, -1.0)
+    v = v / jnp.linalg.norm(v)
+    crosses = lambda t: bool(np_crossings(np.asarray(C.inextensible_nodes(t, d))))  # noqa: E731
+    assert crosses(eq.theta + 0.05 * v) or crosses(eq.theta - 0.05 * v)
+    for up in (True, False):
+        t, _, _, landed = _land(sc, SymmetricAlpha(), eq.theta, eq.force, jnp.zeros(()), v, 1.0, up, Newton())
+        assert bool(landed.converged) and not crosses(t), up
+
+
 # ------------------------------------------------------------------ equilibria in contact
 def test_pressed_state(pressed):
     """At G/L = 0.1 the contact-free up state of the flat strip passes through itself; with

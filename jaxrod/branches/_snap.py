@@ -32,7 +32,7 @@ from jaxtyping import Array
 
 from ..linalg import kkt
 from ._continuation import (Continuation, SymmetricAlpha, _pieces, _tangent, continue_branch, require_float64, corrector)
-from ..energy.contact import contact_energy, self_intersects
+from ..energy.contact import contact_energy, self_intersects, step_bound
 from ._critical import critical_point
 from ..energy.geometry import discretize
 from ..energy.lagrangian import positions
@@ -157,9 +157,13 @@ def _land(scene, parameter, t, m, lam, v, direction, up_expected, solver):
     plus = _fh(scene, parameter, t + eps * v, m, lam)
     minus = _fh(scene, parameter, t - eps * v, m, lam)
     pick = jnp.where((plus > minus) == up_expected, 1.0, -1.0)
-    # with self-contact the steps are capped so that the strip never crosses itself, and a
-    # landing that slides one part along another takes many short steps
-    eq = solve_unflagged(sc, t + pick * eps * v, m, Newton(max_steps=200 if scene.contact is None else 2000))
+    push = pick * eps * v
+    if scene.contact is not None:
+        # the push itself may not carry two parts of the strip through each other (as no Newton
+        # step may: `jaxrod.energy.contact.step_bound`); the steps of the relaxation are capped
+        # the same way, and a landing that slides one part along another takes many short steps
+        push = push * step_bound(t, push, sc)
+    eq = solve_unflagged(sc, t + push, m, Newton(max_steps=200 if scene.contact is None else 2000))
     return eq.theta, eq.force, _fh(scene, parameter, eq.theta, eq.force, lam + direction * 1e-3), eq
 
 
