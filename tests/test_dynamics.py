@@ -206,8 +206,8 @@ def test_brink_start_gradient_matches_central_differences():
     """d(brink start)/d Psi0 against central differences at the fold of the down path
     (Psi0 = 60 deg, N = 24). The start is built from the refined critical state as it is,
     whose derivative is the extended system's; solving it again at alpha_c would attach the
-    implicit derivative of a solve at a critical point, where the Hessian is singular (that
-    was off by 1.9 % here). A fold, not a branch point: there the antisymmetric mode leaves
+    implicit derivative of a solve at a critical point, where the Hessian is singular (1.9 %
+    off here). A fold, not a branch point: there the antisymmetric mode leaves
     the fold height unchanged to first order, so the nudge's sign (either one gives the
     mirror-image snap) is round-off's and a finite difference can straddle a flip."""
     w = jnp.sin(jnp.arange(N) + 1.0)

@@ -149,8 +149,9 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2)):
     the target from the end of the first valid path (or of the last one tried).
 
     Every Newton solve of the homotopy runs at one call site, in one loop whose phase picks
-    the scene and the guess: compiled once instead of once per phase (the program of
-    `snap_angles` spent a quarter of its kernels on three copies of the Newton solve here).
+    the scene and the guess: one compiled copy of the Newton solve instead of one per phase
+    (a copy is about 220 of the XLA kernels of `snap_angles`, whose compile time follows
+    their number).
 
     Returns `(eq, found)`: the polished equilibrium (scene `target`) and whether a path was
     valid."""
