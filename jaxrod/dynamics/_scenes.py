@@ -38,7 +38,7 @@ from ..linalg.batched import solve2
 from .._misc import check_param
 from ..branches import snap_angles, snap_routes
 from ..results import RESULTS
-from ..energy.lagrangian import energies as _energies
+from ..energy.bending import bending_energy as _bending
 
 
 NUDGE = 0.03
@@ -153,8 +153,7 @@ def _brink_start(scene, alpha_c, theta_c, force_c, mode, exists, sgn, past, nudg
         mode = kkt.modes(K, kkt.smallest_eigenvalues(K, 1))[:, 0]
     theta0 = nudge_start(theta_c, mode, sc_run, sgn, nudge)
     ok = exists & jnp.all(jnp.isfinite(theta_c)) & jnp.all(jnp.isfinite(mode))
-    bending = _energies(theta_c, force_c, sc_c)["bending"]
-    return Start(sc_run, theta0, Protocol(a, a), sgn, alpha_c, bending, ok)
+    return Start(sc_run, theta0, Protocol(a, a), sgn, alpha_c, _bending(theta_c, sc_c, discretize(sc_c)), ok)
 
 
 def ramp(scene, direction="up", *, rate=0.5, alpha_start=None, right_only=False, snap=None,

@@ -181,7 +181,7 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2)):
                       eq.theta, eq.force, good)
         # path step: still tracked -> next step, or the polish after the last one; lost ->
         # the next path from the flat start, or the polish if none is left
-        tracked = ok & good & (jnp.max(jnp.abs(eq.theta - t)) < _MAX_STEP_CHANGE)
+        tracked = ok & still_tracked(eq, sgn, t, sc)
         last = step + 1 == steps
         more = k + 1 < kinds.shape[0]
         lost = ~tracked & more
