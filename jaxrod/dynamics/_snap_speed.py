@@ -98,7 +98,7 @@ import jax
 import jax.numpy as jnp
 
 from ._equations import Protocol
-from ._scenes import NUDGE, _direction, nudge_start
+from ._scenes import NUDGE, _brink_start, _direction
 from ._simulate import FIXED_STEP, SOLVERS, _rattle_dt_natural, simulate
 from .._misc import check_param
 from ..branches import snap_angles
@@ -170,9 +170,8 @@ def _run(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
     path = snap.up if sgn > 0 else snap.down
     valid = path.snaps & (path.refine_result == RESULTS.successful)
     alpha_c = jnp.where(valid, path.alpha_c, 0.0)  # keep the run finite where there is no snap
-    a = alpha_c + sgn * past
-    sc_run = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (a, a))
-    theta0 = nudge_start(path.theta_before, path.mode, sc_run, sgn, nudge)
+    start = _brink_start(scene, alpha_c, path.theta_before, path.force_before, path.mode, valid, sgn, past, nudge)
+    sc_run, theta0, a = start.scene, start.theta0, alpha_c + sgn * past
     max_steps = int(math.ceil(t1 / dt)) + 10
     st = scene.strip
     T = st.length**2 * jnp.sqrt(st.line_density / st.bending_stiffness)  # dt, t1 are in units of T
