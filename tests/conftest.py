@@ -53,10 +53,18 @@ os.environ.setdefault("EQX_ON_ERROR", "nan")
 # XLA's LLVM back end at -O0 for the suite: compiling is most of the suite's time and -O0
 # compiles ~40 % faster (snap_angles at N = 40: 12 s instead of 21 s) for ~50 % slower
 # compiled code, which the tests barely run (test_snap.py + test_rattle.py: 176 s of CPU
-# instead of 206 s). No fast-math either way, so the arithmetic is the same IEEE operations;
-# benchmarks and users run at XLA's default level.
-if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0").strip()
+# instead of 206 s). At -O0 XLA's older loop emitters (`xla_cpu_use_fusion_emitters=false`)
+# compile ~40 % faster again than its MLIR fusion emitters, whose own lowering pipeline
+# runs at every level (measured on 2 cores: snap_angles at N = 24, 3.4-4.9 s instead of
+# 6.1-7.3 s; the gradient of snap_speed at N = 16, 9.5-9.8 s instead of 15.8-16.8 s; the same
+# results to the last bit). No fast-math either way, so the arithmetic is the same IEEE
+# operations; benchmarks and users run at XLA's default level.
+_flags = os.environ.get("XLA_FLAGS", "")
+if "xla_backend_optimization_level" not in _flags:
+    _flags += " --xla_backend_optimization_level=0"
+if "xla_cpu_use_fusion_emitters" not in _flags:
+    _flags += " --xla_cpu_use_fusion_emitters=false"
+os.environ["XLA_FLAGS"] = _flags.strip()
 
 import jax  # noqa: E402
 import pytest  # noqa: E402
