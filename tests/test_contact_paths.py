@@ -1,25 +1,18 @@
-"""Snap paths with self-contact (nightly: 1.5-3 min on 2 cores, most of it compiling the
-contact program): `snap_angles` on scenes with `jaxrod.Contact` at N = 48, against the
-contact-free paths.
-
-The contact program is compiled ahead of time at XLA's default back-end level: the suite
-compiles everything else at -O0 (conftest.py), where this program compiles no faster
-(46 s) and runs 4x slower (21 s per call instead of 5 s on 2 cores). One compiled program
-serves every scene below (they differ only in float leaves)."""
+"""Snap paths with self-contact: `snap_angles` on scenes with `jaxrod.Contact` at N = 48,
+against the contact-free paths. One compiled program serves every scene below (they differ
+only in float leaves); compiling it is most of this module's time (about a minute on 2
+cores, at the suite's XLA settings)."""
 
 import jax
 import numpy as np
 import pytest
 
 import jaxrod as jr
-from jaxrod._misc import COMPILER_OPTIONS
 from jaxrod.branches._snap import JUMP_DISTANCE
 from jaxrod.energy import contact as C
 from helpers import np_crossings
 
 N = 48
-
-pytestmark = pytest.mark.slow
 
 
 def _scene(psi0, gap, contact=True):
@@ -28,9 +21,8 @@ def _scene(psi0, gap, contact=True):
 
 @pytest.fixture(scope="module")
 def with_contact():
-    """`snap_angles` for scenes with contact, compiled once at XLA's default level."""
-    options = {**COMPILER_OPTIONS, "xla_backend_optimization_level": 2}
-    return jr.snap_angles.lower(_scene(60.0, 0.2)).compile(compiler_options=options)
+    """`snap_angles` for scenes with contact (one compiled program for all of them)."""
+    return jr.snap_angles
 
 
 def _no_crossing(theta, scene):

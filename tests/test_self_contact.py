@@ -94,7 +94,7 @@ def test_no_force_while_clear():
 def test_hessian_against_autodiff(thickness, pressed):
     """The suffix-sum Hessian equals autodiff's, both with few pairs that can interact (the
     pressed strip: they are gathered into the K slots) and with more than K (a crumpled
-    strip with a thick contact layer: all pairs are assembled)."""
+    strip with a thick contact layer: assembled in several chunks of K)."""
     sc = _scene(thickness=thickness, stiffness=10.0)
     th = _angles(0, scale=2.0) if thickness > 0.1 else pressed.theta
     d = jr.discretize(sc)
@@ -294,8 +294,8 @@ def test_undamped_run_with_contact_conserves_energy(pressed):
     assert np.all(ec[np.isfinite(ec)] > 0.0) and np.ptp(ec) > 0.1 * ec[0]  # in contact throughout, working
 
 
-# ------------------------------------------------------------------ brink, phase diagram, CLI (nightly; the snap
-# paths themselves are checked in CI by test_contact_paths.py)
+# ------------------------------------------------------------------ brink, phase diagram, CLI (nightly: each compiles
+# a contact program of its own; the snap paths are checked in CI by test_contact_paths.py)
 @pytest.mark.slow  # ~3 min: snap_angles and a brink snap compiled with contact
 def test_brink_snap_after_contact_clicks():
     """Psi0 = 60 deg, G/L = 0.2, N = 48, snap down with contact: the path clicks before it
@@ -349,7 +349,6 @@ def _cli(args, capsys):
     return code, *capsys.readouterr()
 
 
-@pytest.mark.slow  # 7 s: compiles the CLI's programs with and without contact
 def test_cli_contact_by_default_where_needed(capsys):
     """`jaxrod equilibrium` at G/L = 0.1: by default contact is switched on because the
     contact-free state passes through itself; `--no-contact` reports that state flagged."""

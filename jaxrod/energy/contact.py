@@ -307,53 +307,73 @@ def step_bound(theta, step, scene, d=None, margin=0.9):
     return jnp.clip(jnp.where(jnp.isfinite(tau), tau, 1.0), 0.0, 1.0)
 
 
-@traced_once
-def contact_hessian(theta, scene, d=None):
-    r"""$\partial^2E_c/\partial\theta^2$, dense (N, N), by the suffix sums of the module
-    docstring from the pairs' Cartesian Hessians.
-
-    Only pairs whose energy can be nonzero contribute (`_may_interact`: the node within the
-    segment's window and closer than the thickness to its line): up to $K=\max(64,2N)$ of
-    them are gathered into fixed slots and assembled, all pairs in the rare state with more
-    than $K$. The contact gradient in the node coordinates (the diagonal term) is assembled
-    from the same pairs."""
-    if d is None:
-        d = discretize(scene)
+def _live_pairs(theta, scene, d):
+    """`(Hx, gx)`: the Hessian and gradient of $E_c$ in the node coordinates, shapes
+    (2(N+1), 2(N+1)) and (2(N+1),), assembled from the pairs whose energy can be nonzero
+    (`contact_hessian`'s docstring says how)."""
     N = theta.shape[0]
     x = inextensible_nodes(theta, d)
     p, j = contact_pairs(scene)
     c = scene.contact
     w = _voronoi(d)[p]
     z = _pair_coordinates(x, p, j)
-    hess = jax.vmap(jax.hessian(_pair_energy), (0, None, None))
-    grad = jax.vmap(jax.grad(_pair_energy), (0, None, None))
+
+    def grad_twice(*a):
+        g = jax.grad(_pair_energy)(*a)
+        return g, g
+
+    # forward over reverse: each pair's Hessian with its gradient as the by-product
+    hess_grad = jax.vmap(jax.jacfwd(grad_twice, has_aux=True), (0, None, None))
     nodes = np.stack([p, j, j + 1], -1)  # (P, 3)
-    idx = (2 * nodes[:, :, None] + np.arange(2)).reshape(-1, 6)  # node-coordinate indices
-    idx = jnp.asarray(idx)
+    idx = jnp.asarray((2 * nodes[:, :, None] + np.arange(2)).reshape(-1, 6))  # node-coordinate indices
 
-    def assemble(sel, used=None):
-        # the pairs `sel` (where `used`): their Hessians and gradients in the node coordinates
-        zs, ws, ii = z[sel], w[sel], idx[sel]
-        if used is not None:
-            ws = jnp.where(used, ws, 0.0)
-        Hp = hess(zs, c.thickness, c.stiffness) * ws[:, None, None]
-        gp = grad(zs, c.thickness, c.stiffness) * ws[:, None]
-        Hx = jnp.zeros((2 * (N + 1), 2 * (N + 1)), x.dtype).at[ii[:, :, None], ii[:, None, :]].add(Hp)
-        return Hx, jnp.zeros(2 * (N + 1), x.dtype).at[ii].add(gp)
+    def assemble(acc, sel, used):
+        # adds the pairs `sel` (where `used`): their Hessians and gradients in the node coordinates
+        Hx, gx = acc
+        zs, ii = z[sel], idx[sel]
+        ws = jnp.where(used, w[sel], 0.0)
+        Hp, gp = hess_grad(zs, c.thickness, c.stiffness)
+        return Hx.at[ii[:, :, None], ii[:, None, :]].add(Hp * ws[:, None, None]), gx.at[ii].add(gp * ws[:, None])
 
+    n2 = 2 * (N + 1)
+    zero = (jnp.zeros((n2, n2), x.dtype), jnp.zeros(n2, x.dtype))
     K = min(max(64, 2 * N), p.size)
-    if K < p.size:
-        # the pairs whose energy can be nonzero (the others have zero energy, gradient and
-        # Hessian), compacted into K slots: O(P), where a top-K selection by distance sorted
-        # all P pairs (2.2 of the contact Hessian's 4.9 ms at N = 100); all P pairs in the rare
-        # state with more than K of them
-        live = _may_interact(z, c.thickness)
-        count = jnp.sum(live)
-        sel = jnp.nonzero(live, size=K, fill_value=0)[0]
-        Hx, gx = jax.lax.cond(count > K, lambda: assemble(jnp.arange(p.size)),
-                              lambda: assemble(sel, jnp.arange(K) < count))
-    else:
-        Hx, gx = assemble(jnp.arange(p.size))
+    if K == p.size:
+        return assemble(zero, jnp.arange(p.size), np.ones(p.size, bool))
+    # the pairs whose energy can be nonzero (the others have zero energy, gradient and
+    # Hessian), compacted in order: O(P), where a top-K selection by distance sorted all P
+    # pairs (2.2 of the contact Hessian's 4.9 ms at N = 100)
+    live = _may_interact(z, c.thickness)
+    count = jnp.sum(live)
+    chunks = -(-p.size // K)
+    order = jnp.nonzero(live, size=chunks * K, fill_value=0)[0]
+
+    def chunk(k, acc):
+        slots = k * K + jnp.arange(K)
+        sel = jax.lax.dynamic_slice(order, (k * K,), (K,))
+        return jax.lax.cond(k * K < count, lambda a: assemble(a, sel, slots < count), lambda a: a, acc)
+
+    return jax.lax.fori_loop(0, chunks, chunk, zero)
+
+
+@traced_once
+def contact_hessian(theta, scene, d=None):
+    r"""$\partial^2E_c/\partial\theta^2$, dense (N, N), by the suffix sums of the module
+    docstring from the pairs' Cartesian Hessians.
+
+    Only pairs whose energy can be nonzero contribute (`_may_interact`: the node within the
+    segment's window and closer than the thickness to its line): they are gathered in order
+    into chunks of $K=\max(64,2N)$ fixed slots, and a loop of $\lceil P/K\rceil$ passes over
+    the $P$ pairs assembles the chunks that hold any (one pass in the usual state with at
+    most $K$ of them, each further pass skipped by a `lax.cond`). The assembly is compiled
+    once however many chunks there are (a `lax.cond` between a $K$-slot and an all-pairs
+    assembly compiled it twice at every call site: half of the contact program's kernels).
+    The contact gradient in the node coordinates (the diagonal term) is assembled from the
+    same pairs."""
+    if d is None:
+        d = discretize(scene)
+    N = theta.shape[0]
+    Hx, gx = _live_pairs(theta, scene, d)
     Hx = Hx.reshape(N + 1, 2, N + 1, 2)
     gx = gx.reshape(N + 1, 2)
     S = jnp.flip(jnp.cumsum(jnp.flip(Hx, (0, 2)), 0), (0, 2))
