@@ -141,7 +141,7 @@ def pytest_configure(config):
 # notebook 03 has compiled those programs into the shared persistent cache, not beside it
 # (both compiling them at once cost ~60 s more).
 HEAVY_FIRST = ("test_notebook_03_snap_speed_design", "test_notebook_02_snap_angle_design",
-               "test_notebook_05_paper_figures", "test_snap_physics", "test_verdicts", "test_long_horizon",
+               "test_notebook_05_paper_figures", "test_snap_physics", "test_contact_paths", "test_verdicts", "test_long_horizon",
                "test_extrapolate", "test_resume", "test_properties",
                "test_notebook_01_getting_started", "test_design_speed", "test_notebook_04_programmable_actuator",
                "test_sweeps", "test_self_contact", "test_design", "test_cli", "test_snap", "test_dynamics_physics", "test_actuator", "test_hysteresis",
