@@ -181,6 +181,7 @@ def main(argv=None):
         res = json.load(open(path))
         meta = res.pop("meta")
         res["costs"] = costs([24] if q else [48, 100])
+        meta["costs_date"] = datetime.date.today().isoformat()
         with open(path, "w") as f:
             json.dump(dict(meta=meta, **res), f, indent=1)
         write_md(meta, res, os.path.join(HERE, "results", f"contact{suffix}.md"), suffix)
@@ -225,7 +226,9 @@ def _f(x, fmt="{:.3f}"):
 
 def write_md(meta, res, path, suffix):
     L = [f"# Self-contact: cost and effect (N = {meta['n']})", "",
-         f"{meta['date']}, {meta['machine']}, {meta['cpus']} cores, jax {meta['jax']}; {meta['seconds']:.0f} s. "
+         f"{meta['date']}, {meta['machine']}, {meta['cpus']} cores, jax {meta['jax']}; {meta['seconds']:.0f} s"
+         + (f"; the cost section measured {meta['costs_date']} in a run of its own (`--costs-only`). "
+            if meta.get("costs_date") else ". ") +
          "Contact: thickness 0.01 L, stiffness 1e5 B/L^3, exclusion 0.1 L (`jaxrod.Contact()`).", "",
          "## Cost", "",
          "| N | Hessian (ms) contact / free | Newton step (ms) contact / free | stability count (ms) contact / free "

@@ -304,3 +304,18 @@ def test_start_state_fold_in_the_gap_and_derivative_fd():
     fd = (fd[0] - fd[1]) / (2 * h)
     assert dg > 0  # wider folds keep their down state to larger gaps (as G*_up(Psi0) rises)
     np.testing.assert_allclose(dg, fd, rtol=1e-5)
+
+
+@pytest.mark.slow  # ~3-5 min: the termination search compiled and run with self-contact
+def test_termination_gap_with_contact_unchanged():
+    """With self-contact modelled (`contact=jr.Contact()`) the termination gaps of Psi0 = 60
+    deg at N = 48 equal the contact-free ones: the strip stays clear of itself at the gaps
+    where its snaps end, so contact changes no evaluation the search makes there."""
+    grid = (0.3, 0.5, 0.7, 0.9)
+    free = jr.termination_gap(60.0, n=48, grid=grid, tol=1e-4)
+    with_contact = jr.termination_gap(60.0, n=48, grid=grid, tol=1e-4, contact=jr.Contact())
+    assert free.result_up == with_contact.result_up == jr.RESULTS.successful
+    assert free.result_down == with_contact.result_down == jr.RESULTS.successful
+    for name in ("up", "down"):
+        a, b = getattr(free, f"gap_{name}"), getattr(with_contact, f"gap_{name}")
+        assert np.isfinite(a) and b == pytest.approx(a, abs=1e-9), name

@@ -210,12 +210,16 @@ def _snap_at(base, psi0, gap):
 
 
 def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
-                    progress=False, creases=None) -> TerminationGap:
+                    progress=False, creases=None, contact=None) -> TerminationGap:
     r"""The termination gaps $G^\ast/L$ of the snap-up and snap-down paths at fold angle
     `psi0_deg` (degrees), by scan + bisection on [`jaxrod.snap_angles`][] (see the module
     docstring), to `tol` in $G/L$. `creases`: crease positions (fractions of L) for a strip
     with a crease of fold angle `psi0_deg` at each instead of the centred crease (as
-    `jaxrod.phase_diagram(..., creases=...)`). Needs float64.
+    `jaxrod.phase_diagram(..., creases=...)`). `contact`: a `jaxrod.Contact` to model
+    self-contact at every gap (the termination gaps lie where the strip stays clear of
+    itself, so they do not change; the small gaps of the scan then snap as a real strip
+    does instead of being flagged `self_intersecting`; each evaluation costs about 100x
+    more). Needs float64.
 
     Returns a [`jaxrod.TerminationGap`][]. One compilation per `(n, s0 dtype)`; each
     evaluation is one `snap_angles` call (~0.3 s at n = 100)."""
@@ -232,10 +236,10 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
     if not grid or grid[0] <= 0.0 or grid[-1] >= 1.0:
         raise ValueError(f"grid must hold gaps in (0, 1), got {grid!r}")
     if creases is None:
-        base = make_scene(float(psi0_deg), 0.5, s0=s0, n=n)
+        base = make_scene(float(psi0_deg), 0.5, s0=s0, n=n, contact=contact)
     else:  # a crease of fold angle Psi0 at each position (fractions of L)
         layout = crease_layout(creases, float(psi0_deg), s0)
-        base = make_scene(180.0, 0.5, s0=s0, n=n, creases=[(c, float(psi0_deg)) for c in layout])
+        base = make_scene(180.0, 0.5, s0=s0, n=n, creases=[(c, float(psi0_deg)) for c in layout], contact=contact)
     if float(psi0_deg) == 180.0:
         # the flat strip: no crease, the snap at the branch point keeps its size relative to
         # the buckle amplitude as G -> L (tests/test_termination.py checks it snaps at

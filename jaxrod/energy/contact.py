@@ -365,9 +365,9 @@ def contact_hessian(theta, scene, d=None):
     segment's window and closer than the thickness to its line): they are gathered in order
     into chunks of $K=\max(64,2N)$ fixed slots, and a loop of $\lceil P/K\rceil$ passes over
     the $P$ pairs assembles the chunks that hold any (one pass in the usual state with at
-    most $K$ of them, each further pass skipped by a `lax.cond`). The assembly is compiled
-    once however many chunks there are (a `lax.cond` between a $K$-slot and an all-pairs
-    assembly compiled it twice at every call site: half of the contact program's kernels).
+    most $K$ of them, each further pass skipped by a `lax.cond`). So each call site of the
+    Hessian compiles one copy of the pair assembly however many chunks there are (a second,
+    all-pairs assembly for crowded states would double the contact programs' kernels).
     The contact gradient in the node coordinates (the diagonal term) is assembled from the
     same pairs."""
     if d is None:
