@@ -1,7 +1,7 @@
 """Snap paths with self-contact: `snap_angles` on scenes with `jaxrod.Contact` at N = 48,
-against the contact-free paths. One compiled program serves every scene below (they differ
-only in float leaves); compiling it is most of this module's time (about a minute on 2
-cores, at the suite's XLA settings)."""
+against the contact-free paths, and the brink snap after contact clicks. One compiled
+program serves every scene below (they differ only in float leaves); compiling it is most of
+this module's time (about a minute on 2 cores, at the suite's XLA settings)."""
 
 import jax
 import numpy as np
@@ -71,3 +71,19 @@ def test_flat_strip_pressed_snaps_symmetrically(with_contact):
     flat = with_contact(_scene(180.0, 0.1))
     assert flat.up.result == flat.down.result == jr.RESULTS.successful
     assert float(flat.up.alpha_c) == pytest.approx(-float(flat.down.alpha_c), abs=1e-6)
+
+
+def test_brink_snap_after_contact_clicks(with_contact):
+    """Psi0 = 60 deg, G/L = 0.2, snap down with contact: the path clicks before it snaps,
+    and the brink run from the snap's critical state (`jr.snap_dynamics`, adaptive) snaps:
+    the fold goes through y = 0 within 1 T at a speed above 5 v*, and no frame of the run
+    passes through itself."""
+    sc = _scene(60.0, 0.2)
+    r = with_contact(sc)
+    assert r.down.result == jr.RESULTS.successful and int(r.down.clicks) >= 1
+    start, tr = jr.snap_dynamics(sc, "down", snap=r, t1=1.0, n_frames=16)
+    assert bool(start.ok)
+    assert tr.result == jr.RESULTS.successful, jr.RESULTS[tr.result]
+    assert bool(tr.snapped) and float(tr.v_s) > 5.0
+    for x in np.asarray(tr.positions):
+        assert not np_crossings(x[np.all(np.isfinite(x), -1)])

@@ -320,20 +320,8 @@ def test_undamped_run_with_contact_conserves_energy(pressed):
     assert np.all(ec[np.isfinite(ec)] > 0.0) and np.ptp(ec) > 0.1 * ec[0]  # in contact throughout, working
 
 
-# ------------------------------------------------------------------ brink, phase diagram, CLI (nightly: each compiles
-# a contact program of its own; the snap paths are checked in CI by test_contact_paths.py)
-@pytest.mark.slow  # ~3 min: snap_angles and a brink snap compiled with contact
-def test_brink_snap_after_contact_clicks():
-    """Psi0 = 60 deg, G/L = 0.2, N = 48, snap down with contact: the path clicks before it
-    snaps (`test_contact_paths.py` checks the path in CI), and the brink run from the snap's
-    critical state resolves the snap (`jr.snap_speed` finite, its fold through y = 0)."""
-    sc = _scene(60.0, 0.2, n=48)
-    down = jr.snap_angles(sc).down
-    assert down.result == jr.RESULTS.successful and int(down.clicks) >= 1
-    run = jr.snap_speed(sc, "down")
-    assert np.isfinite(float(run)) and float(run) > 5.0
-
-
+# ------------------------------------------------------------------ the CLI's clicks (nightly: its own contact program),
+# the phase diagram (the snap paths and the brink after clicks are in test_contact_paths.py)
 @pytest.mark.slow  # ~2 min: the CLI's query compiled with contact
 def test_cli_reports_contact_clicks(capsys):
     """`jaxrod snap-angles` with contact prints each path's clicks before its snap (the
@@ -351,7 +339,6 @@ def test_cli_reports_contact_clicks(capsys):
     assert "clicks_down" not in json.loads(out)
 
 
-@pytest.mark.slow  # ~2 min
 def test_phase_diagram_with_contact_to_small_gaps():
     """The phase diagram with contact down to G/L = 0.05: every path successful on a small
     grid where the contact-free one is flagged self_intersecting at the small gaps."""

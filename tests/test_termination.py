@@ -306,7 +306,7 @@ def test_start_state_fold_in_the_gap_and_derivative_fd():
     np.testing.assert_allclose(dg, fd, rtol=1e-5)
 
 
-@pytest.mark.slow  # ~3-5 min: the termination search compiled and run with self-contact
+@pytest.mark.slow  # ~11 min on 2 cores: the termination search compiled and run with self-contact
 def test_termination_gap_with_contact_unchanged():
     """With self-contact modelled (`contact=jr.Contact()`) the termination gaps of Psi0 = 60
     deg at N = 48 equal the contact-free ones: the strip stays clear of itself at the gaps
