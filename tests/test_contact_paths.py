@@ -1,5 +1,5 @@
 """Snap paths with self-contact: `snap_angles` on scenes with `jaxrod.Contact` at N = 48,
-against the contact-free paths, and the brink snap after contact clicks. One compiled
+against the contact-free paths, the brink snap after contact clicks and the CLI's clicks. One compiled
 program serves every scene below (they differ only in float leaves); compiling it is most of
 this module's time (about a minute on 2 cores, at the suite's XLA settings)."""
 
@@ -87,3 +87,28 @@ def test_brink_snap_after_contact_clicks(with_contact):
     assert bool(tr.snapped) and float(tr.v_s) > 5.0
     for x in np.asarray(tr.positions):
         assert not np_crossings(x[np.all(np.isfinite(x), -1)])
+
+
+def test_cli_reports_contact_clicks(with_contact, capsys):
+    """`jaxrod snap-angles` with contact prints each path's clicks before its snap (the
+    same numbers as the API's `SnapPath.clicks`); without contact it prints none."""
+    import json
+
+    from jaxrod.cli import main
+
+    args = ["snap-angles", "--psi0", "60", "--gap", "0.2", "--n", str(N), "--no-extrapolate", "--json"]
+    r = with_contact(_scene(60.0, 0.2))
+    for extra, contact in ((["--contact-thickness", "0.01"], True), (["--no-contact"], False)):
+        old = jax.config.jax_enable_x64
+        try:
+            assert main(args + extra) in (0, 3)
+        finally:
+            jax.config.update("jax_enable_x64", old)
+        rec = json.loads(capsys.readouterr().out)
+        assert rec["contact"] is contact
+        if contact:
+            assert rec["result_down"] == "successful"
+            assert rec["clicks_down"] == int(r.down.clicks) >= 1 and rec["clicks_up"] == int(r.up.clicks)
+            assert rec["alpha_c_down_deg"] == pytest.approx(np.degrees(float(r.down.alpha_c)), abs=1e-9)
+        else:
+            assert "clicks_down" not in rec

@@ -320,25 +320,8 @@ def test_undamped_run_with_contact_conserves_energy(pressed):
     assert np.all(ec[np.isfinite(ec)] > 0.0) and np.ptp(ec) > 0.1 * ec[0]  # in contact throughout, working
 
 
-# ------------------------------------------------------------------ the CLI's clicks (nightly: its own contact program),
-# the phase diagram (the snap paths and the brink after clicks are in test_contact_paths.py)
-@pytest.mark.slow  # ~2 min: the CLI's query compiled with contact
-def test_cli_reports_contact_clicks(capsys):
-    """`jaxrod snap-angles` with contact prints each path's clicks before its snap (the
-    same numbers as the API's `SnapPath.clicks`); without contact it prints none."""
-    import json
-
-    args = ["snap-angles", "--psi0", "60", "--gap", "0.2", "--n", "48", "--no-extrapolate", "--json"]
-    _, out, _ = _cli(args + ["--contact-thickness", "0.01"], capsys)
-    rec = json.loads(out)
-    r = jr.snap_angles(_scene(60.0, 0.2, n=48))
-    assert rec["contact"] is True and rec["result_down"] == "successful"
-    assert rec["clicks_down"] == int(r.down.clicks) >= 1 and rec["clicks_up"] == int(r.up.clicks)
-    assert rec["alpha_c_down_deg"] == pytest.approx(np.degrees(float(r.down.alpha_c)), abs=1e-9)
-    _, out, _ = _cli(args + ["--no-contact"], capsys)
-    assert "clicks_down" not in json.loads(out)
-
-
+# ------------------------------------------------------------------ the phase diagram (the snap paths, the brink after
+# clicks and the CLI's clicks are in test_contact_paths.py)
 def test_phase_diagram_with_contact_to_small_gaps():
     """The phase diagram with contact down to G/L = 0.05: every path successful on a small
     grid where the contact-free one is flagged self_intersecting at the small gaps."""

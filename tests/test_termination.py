@@ -161,6 +161,35 @@ def test_termination_codes_follow_the_evaluations(monkeypatch):
                ok(lambda g: g < 0.3))
     assert result_name(jr.termination_gap(60.0, tol=1e-3).result_up) == "no_snap"
 
+def test_contact_reaches_every_evaluation(monkeypatch):
+    """`termination_gap(..., contact=...)` evaluates every gap of its scan and bisection on a
+    scene with that contact model (stand-in criterion; the search with the real contact
+    program is the nightly `test_termination_gap_with_contact_unchanged`), and without it on
+    contact-free scenes."""
+    from jaxrod.branches import _termination
+
+    seen = []
+
+    def fake(base, psi0, gap):
+        sc = _termination._with_fold(base, psi0, gap)
+        seen.append(None if sc.contact is None else (float(sc.contact.thickness), float(sc.contact.stiffness)))
+        snaps = float(gap) < 0.62
+        one = dict(snaps=snaps, alpha=0.5, kind=2 if snaps else 0, jump=0.5, theta=np.zeros(3), force=np.zeros(2),
+                   mode=np.zeros(3), result=int(jr.RESULTS.successful._value))
+        return dict(up=one, down=one, has_up=True, has_down=True)
+
+    monkeypatch.setattr(_termination, "_snap_at", fake)
+    r = jr.termination_gap(60.0, tol=1e-3, contact=jr.Contact(thickness=0.02, stiffness=3e4))
+    assert abs(r.gap_up - 0.62) < 1e-3 and len(seen) > 10
+    assert set(seen) == {(0.02, 3e4)}
+    seen.clear()
+    jr.termination_gap(60.0, tol=1e-3, creases=[0.3, 0.7], contact=jr.Contact())
+    assert set(seen) == {(0.01, 1e5)}
+    seen.clear()
+    jr.termination_gap(60.0, tol=1e-3)
+    assert set(seen) == {None}
+
+
 def test_cli_prints_termination_codes(monkeypatch, capsys):
     ok = lambda s: (lambda g: (s(g), "successful"))  # noqa: E731
     _fake_scan(monkeypatch, ok(lambda g: False), ok(lambda g: g < 0.3))
