@@ -58,3 +58,26 @@ def test_options_reach_the_compiler():
     assert _sine_in_loop_body(ours.compiled.as_text())
     assert not _sine_in_loop_body(default.compiled.as_text())
     np.testing.assert_allclose(ours(*args), default(*args), rtol=1e-15)
+
+
+def test_fast_compile_mode(monkeypatch):
+    """JAXROD_COMPILE=fast: jaxrod's jit compiles with FAST_COMPILE_OPTIONS (in its own
+    variant, read at each call) and gives the same values; a bad value is one ValueError
+    naming the variable, and the CLI's exit 2."""
+    from jaxrod._misc import COMPILER_OPTIONS, FAST_COMPILE_OPTIONS, compiler_options
+    from jaxrod.cli import main
+
+    a = jnp.asarray(2.0)
+    slow = float(_newton_sqrt(a))
+    assert compiler_options() == COMPILER_OPTIONS
+    monkeypatch.setenv("JAXROD_COMPILE", "fast")
+    assert compiler_options() == {**COMPILER_OPTIONS, **FAST_COMPILE_OPTIONS}
+    assert float(_newton_sqrt(a)) == slow
+    monkeypatch.setenv("JAXROD_COMPILE", "quick")
+    try:
+        _newton_sqrt(a)
+    except ValueError as e:
+        assert "JAXROD_COMPILE" in str(e) and "'quick'" in str(e)
+    else:
+        raise AssertionError("no ValueError")
+    assert main(["equilibrium", "--n", "8", "--json"]) == 2

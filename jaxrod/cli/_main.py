@@ -686,6 +686,12 @@ def main(argv=None):
         # the library's warnings (an under-resolved crease, ...) as one line each
         warnings.showwarning = lambda message, *a, **k: print(f"jaxrod: warning: {message}", file=sys.stderr)
         try:
+            from .._misc import compile_mode
+
+            try:
+                compile_mode()  # JAXROD_COMPILE: checked before anything is compiled
+            except ValueError as e:
+                raise InputError(str(e)) from None
             args = resolve_scene_args(_build_parser().parse_args(argv))
             if hasattr(args, "coordinator"):
                 start_distributed(args)  # before JAX starts its backend
