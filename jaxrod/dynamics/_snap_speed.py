@@ -97,7 +97,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._equations import Protocol
 from ._scenes import NUDGE, _brink_start, _direction
 from ._simulate import FIXED_STEP, SOLVERS, _rattle_dt_natural, simulate
 from .._misc import check_param
@@ -171,7 +170,7 @@ def _run(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
     valid = path.snaps & (path.refine_result == RESULTS.successful)
     alpha_c = jnp.where(valid, path.alpha_c, 0.0)  # keep the run finite where there is no snap
     start = _brink_start(scene, alpha_c, path.theta_before, path.force_before, path.mode, valid, sgn, past, nudge)
-    sc_run, theta0, a = start.scene, start.theta0, alpha_c + sgn * past
+    sc_run = start.scene
     max_steps = int(math.ceil(t1 / dt)) + 10
     st = scene.strip
     T = st.length**2 * jnp.sqrt(st.line_density / st.bending_stiffness)  # dt, t1 are in units of T
@@ -182,7 +181,7 @@ def _run(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
     sc_run = eqx.tree_at(lambda s: s.strip.line_density, sc_run, st.bending_stiffness / st.length**4)
     if scene.gravity is not None:
         sc_run = eqx.tree_at(lambda s: s.gravity.g, sc_run, scene.gravity.g * T**2)
-    tr = simulate(sc_run, theta0, Protocol(a, a), t1=t1, dt=dt, solver=solver, direction=sgn,
+    tr = simulate(sc_run, start.theta0, start.protocol, t1=t1, dt=dt, solver=solver, direction=sgn,
                   max_steps=max_steps, n_fine=n_fine, n_frames=2)
     spacing = t1 / (n_fine - 1)
     stopped = tr.t_end < t1 - 2 * dt
