@@ -28,8 +28,17 @@ plus $\ell^\top v_\theta=1$. This system is regular at a simple symmetry-breakin
 bifurcation (Werner & Spence 1984); `tests/test_critical.py` checks its Jacobian's
 condition number numerically.
 
-$\ell = h\odot v_0$ with $v_0$ the starting mode ($h$: segment lengths). The Jacobian is
-dense (autodiff, `jax.jacfwd`), $(2N+5)^2$ or $(N+3)^2$: fine for $N\lesssim400$.
+$\ell = h\odot v_0$ with $v_0$ the starting mode ($h$: segment lengths).
+
+**Jacobian.** Dense, $(2N+5)^2$ or $(N+3)^2$, solved by one LU per Newton step, but
+assembled from its sparsity ([`_structured_jacobian`][]): the energy couples only
+neighbouring angles, so the rows of $F_\theta$ and $(\mathsf Kv)_\theta$ depend on the
+angles $\theta$ and mode angles $v_\theta$ only within $|i-j|\le1$. Three colour probes
+($j \bmod 3$) per angle block, one forward-mode probe per remaining column ($\mu$,
+$\alpha$, $v_\mu$) and one reverse-mode probe per remaining row (the constraint rows of
+$F$ and $\mathsf Kv$, $\ell^\top v_\theta$) give every entry: 11 forward and 5 reverse
+probes instead of $2N+5$ forward ones. With self-contact the angle blocks are dense and
+`jax.jacfwd` builds the Jacobian.
 
 **Derivatives.** The Newton iterations run on `stop_gradient`-ed data; the result is
 then passed once more through $z^\ast \leftarrow z^\ast - J^{-1}R(z^\ast;p)$ with $J$
@@ -137,28 +146,88 @@ def _sym_residual(y, scene, parameter, ell):
 
 # ----- Newton with an implicit-derivative final step ------------------------------------
 
-def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True):
-    """Plain Newton on res(z) = 0 with dense autodiff Jacobians. An inactive call (the
-    system `kind` does not select) takes no step: under `vmap` the loop then runs only as
-    long as the members that need it."""
-    jac = jax.jacfwd(res)
+def _structured_jacobian(res, z, n, row_starts, col_starts):
+    r"""The Jacobian of `res` at `z` (square), assembled from its sparsity (module docstring).
+
+    `col_starts`: the first columns of the angle-like blocks, `n` columns each; `row_starts`:
+    the first rows of the blocks of `n` rows whose row $i$ depends on column $j$ of every
+    angle-like block only for $|i-j|\le1$. Those entries come from three colour probes per
+    block (forward mode, columns $j \bmod 3$ summed); every other column from its own
+    forward probe, every other row from its own reverse probe. Exact (no finite
+    differences): equal to `jax.jacfwd(res)(z)` where the sparsity holds."""
+    M = z.shape[0]
+    dtype = z.dtype
+    j = np.arange(n)
+    local_cols = np.concatenate([c + j for c in col_starts])
+    local_rows = np.concatenate([r + j for r in row_starts])
+    dense_cols = np.setdiff1d(np.arange(M), local_cols)
+    dense_rows = np.setdiff1d(np.arange(M), local_rows)
+    seeds = np.zeros((3 * len(col_starts) + dense_cols.size, M))
+    for b, c in enumerate(col_starts):
+        for colour in range(3):
+            seeds[3 * b + colour, c + j[j % 3 == colour]] = 1.0
+    seeds[3 * len(col_starts) + np.arange(dense_cols.size), dense_cols] = 1.0
+    out, lin = jax.linearize(res, z)
+    JS = jax.vmap(lin)(jnp.asarray(seeds, dtype))  # (probes, M): J @ seed
+    # the banded entries of the local rows: row i of a row block, column i + d of a column block
+    rr, cc, pp = [], [], []
+    for r in row_starts:
+        for b, c in enumerate(col_starts):
+            for d in (-1, 0, 1):
+                i = j[(j + d >= 0) & (j + d < n)]
+                rr.append(r + i)
+                cc.append(c + i + d)
+                pp.append(3 * b + (i + d) % 3)
+    rr, cc, pp = (np.concatenate(x) for x in (rr, cc, pp))
+    J = jnp.zeros((M, M), dtype)
+    J = J.at[:, dense_cols].set(JS[3 * len(col_starts):].T)
+    J = J.at[rr, cc].set(JS[pp, rr])
+    vjp = jax.linear_transpose(lin, z)  # reverse mode from the same linearization
+    rows = jax.vmap(lambda e: vjp(e)[0])(jnp.eye(M, dtype=out.dtype)[dense_rows])
+    return J.at[dense_rows].set(rows)
+
+
+def _jacobian_fn(res, scene, N, kind):
+    """z -> the Jacobian of the extended system `kind` ("fold", "sym" or "cusp") of a
+    scene with N segments: structured (`_structured_jacobian`) without self-contact,
+    `jax.jacfwd` with it (dense angle blocks)."""
+    if scene.contact is not None:
+        return jax.jacfwd(res)
+    if kind == "sym":
+        H = N // 2
+        return lambda y: _structured_jacobian(res, y, H, (0, H + 1), (0, H + 2))
+    return lambda z: _structured_jacobian(res, z, N, (0, N + 2), (0, N + 3))
+
+
+def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True, jac=None):
+    """Plain Newton on res(z) = 0 with dense Jacobians (`jac`, default `jax.jacfwd(res)`).
+
+    Returns `(z, k, done, J)`: `J` the Jacobian at the returned `z` (the implicit step's),
+    from one last pass of the loop that evaluates it and takes no step, so that one copy of
+    the Jacobian's program serves the iterations and the derivative; the identity where the
+    loop did not run or `z` is not finite. An inactive call (the system `kind` does not
+    select) does not run the loop: under `vmap` the loop then runs only as long as the
+    members that need it."""
+    jac = jax.jacfwd(res) if jac is None else jac
+    eye = jnp.eye(z0.shape[0], dtype=z0.dtype)
 
     def cond(c):
-        z, k, done, _ = c
-        return (~done) & (k < max_steps) & jnp.all(jnp.isfinite(z))
+        z, _, _, _, final = c
+        return (~final) & jnp.all(jnp.isfinite(z))
 
     def body(c):
-        z, k, _, _ = c
-        r = res(z)
-        dz = batched.solve(jac(z), -r)
-        z = z + dz
-        done = (jnp.abs(dz[idx_alpha]) < tol_alpha) & (jnp.max(jnp.abs(dz)) < 1e3 * tol_alpha)
-        return z, k + 1, done, jnp.max(jnp.abs(r))
+        z, k, done, _, _ = c
+        J = jac(z)
+        last = done | (k >= max_steps)  # J is the Jacobian at the returned z: no step
+        dz = lax.cond(last, lambda: jnp.zeros_like(z), lambda: batched.solve(J, -res(z)))
+        converged = (jnp.abs(dz[idx_alpha]) < tol_alpha) & (jnp.max(jnp.abs(dz)) < 1e3 * tol_alpha)
+        return z + dz, k + jnp.where(last, 0, 1), done | (~last & converged), J, last
 
     active = jnp.asarray(active, bool)
-    z, k, done, _ = lax.while_loop(cond, body, (z0, jnp.zeros((), jnp.int32), ~active,
-                                                jnp.full((), jnp.inf, z0.dtype)))
-    return z, k, done & active
+    z, k, done, J, final = lax.while_loop(cond, body, (z0, jnp.zeros((), jnp.int32), jnp.zeros((), bool), eye,
+                                                       ~active))
+    J = jnp.where(final & jnp.all(jnp.isfinite(z)), J, eye)
+    return z, k, done & active, J
 
 
 def _implicit_step(res_p, z, jac_z):
@@ -235,20 +304,23 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
             unpack = _sym_unpack
             ia = N // 2 + 1
         active = (kind == which) | (len(outs_kinds) == 1)
-        z, k, done = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, ia, active)
+        jac = _jacobian_fn(lambda z: res(z, scene_sg), scene_sg, N, "fold" if which == KIND_FOLD else "sym")
+        z, k, done, J = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, ia, active, jac)
         finite = jnp.all(jnp.isfinite(z))
         # The system not selected by `kind` (and a failed one) is singular or non-finite: its
         # derivative step uses the start point and the identity, so that no NaN reaches the
         # gradient of the selected one (a zero cotangent times inf is NaN).
         z_use = jnp.where(active & finite, z, z0)
         eye = jnp.eye(z0.shape[0], dtype=dtype)
-        J = lax.cond(active & finite, lambda zu: jax.jacfwd(lambda z: res(z, scene_sg))(zu), lambda zu: eye, z_use)
         J = jnp.where(active & finite & jnp.all(jnp.isfinite(J)), J, eye)
         r = jnp.max(jnp.abs(res(z, scene_sg)))
         # A branch point exists only in a mirror-symmetric scene; its derivative is that of
         # the symmetric family, taken through the scene's mirror-symmetric part
         sc_d = scene if which == KIND_FOLD else mirror_symmetric_part(scene)
-        z_imp = _implicit_step(lambda z: res(z, sc_d), sg(z_use), J)
+        # the unselected system skips its solve (under `vmap` the `cond` runs both branches,
+        # and the identity above keeps that branch finite)
+        z_imp = lax.cond(active & finite, lambda zu: _implicit_step(lambda z: res(z, sc_d), zu, J),
+                         lambda zu: zu, sg(z_use))
         z = jnp.where(active & finite, z_imp, z)
         t, m, a, vt, vm = unpack(z, N)
         result = RESULTS.where(done & finite, RESULTS.successful,
@@ -350,10 +422,10 @@ def cusp_point(scene, theta, force, alpha, mode, *, parameter: AbstractParameter
     def res(z, sc):
         return _cusp_residual(z, sc, parameter, ell)
 
-    z, k, done = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, 2 * N + 5)
+    jac = _jacobian_fn(lambda z: res(z, scene_sg), scene_sg, N, "cusp")
+    z, k, done, J = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, 2 * N + 5, jac=jac)
     finite = jnp.all(jnp.isfinite(z))
     z_use = jnp.where(finite, z, z0)
-    J = jax.jacfwd(lambda z: res(z, scene_sg))(z_use)
     J = jnp.where(finite & jnp.all(jnp.isfinite(J)), J, jnp.eye(J.shape[0], dtype=dtype))
     r = jnp.max(jnp.abs(res(z, scene_sg)))
     z = jnp.where(finite, _implicit_step(lambda z: res(z, scene), sg(z_use), J), z)
