@@ -278,7 +278,18 @@ def test_screen_never_changes_the_answer(tol):
         th[n // 2] = np.pi / 2 - eps
         th[: n // 2] = -np.pi / 2 + eps
         near.append(th)
-    thetas = jnp.asarray(np.array(smooth + walks + near))
+    # hairpins: up, a half turn over two segments, down beside the first arm, the arms a
+    # gap g apart with g from 0.1 tol to 10 tol (the bounding-box screen's limit)
+    h = 1.0 / n
+    hairpin = []
+    for g in tol * np.geomspace(0.1, 10.0, 60):
+        th = np.full(n, np.pi / 2)
+        phi = np.arccos(np.clip(g / (2 * h), 0.0, 1.0))  # two segments turn by pi, g across
+        th[n // 2] = phi
+        th[n // 2 + 1] = -phi
+        th[n // 2 + 2:] = -np.pi / 2
+        hairpin.append(th)
+    thetas = jnp.asarray(np.array(smooth + walks + near + hairpin))
     got = np.asarray(intersects_tol_batch(thetas, scene, tol))
     ref = np.asarray(full_batch(thetas, scene, tol))
     np.testing.assert_array_equal(got, ref)
@@ -289,6 +300,13 @@ def test_screen_never_changes_the_answer(tol):
     # and the screen alone decides a good part of them
     screened = jax.vmap(lambda t: _contact._screen(_contact._nodes(t, scene, None), t, tol))(thetas)
     assert int(np.sum(screened)) > 100 and not np.any(np.asarray(screened) & ref)
+    # the bounding-box screen never passes a shape with a pair within tol, and decides shapes
+    # the monotone screen cannot (angle range above pi)
+    boxed = np.asarray(jax.vmap(lambda t: _contact._boxes_apart(_contact._nodes(t, scene, None), tol, 2))(thetas))
+    assert not np.any(boxed & ref)
+    assert int(np.sum(boxed & ~np.asarray(screened))) > 20
+    hair = ref[-60:]
+    assert 0 < hair.sum() < 60  # the hairpins straddle tol
 
 
 def test_screen_decides_smooth_states(up_state, critical_states):
