@@ -41,8 +41,10 @@ FAST_COMPILE_OPTIONS = {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion
 XLA's older loop emitters instead of its MLIR fusion emitters, whose own lowering pipeline is
 most of the compile time at -O0. The same IEEE operations (no fast-math), so the same results
 to round-off; measured on 2 cores for `snap_angles` at N = 100: 3.1 s of compile instead of
-7.1 s, 0.096 s per call instead of 0.049 s. Worth it for one-off queries; sweeps and
-benchmarks want the default."""
+7.1 s, 0.096 s per call instead of 0.049 s. The dynamics' programs (`dynamics_jit`) take
+these options alone in the fast mode (a brink `snap_dynamics` at N = 100: 6.5 s of trace and
+compile instead of 9.1 s, 1.1 s of run instead of 0.3 s). Worth it for one-off queries; sweeps
+and benchmarks want the default."""
 
 
 def compile_mode() -> str:
@@ -55,27 +57,33 @@ def compile_mode() -> str:
     return mode
 
 
-def compiler_options() -> dict:
+def compiler_options(dynamics: bool = False) -> dict:
     """`COMPILER_OPTIONS` (plus `FAST_COMPILE_OPTIONS` in the "fast" `compile_mode`) where
     JAX's default backend is the CPU (where they were measured), XLA's defaults on
-    accelerators."""
+    accelerators. `dynamics`: the options of the dynamics' programs, XLA's defaults in the
+    "optimized" mode (their step loops run slower without the disabled passes) and
+    `FAST_COMPILE_OPTIONS` alone in the "fast" one."""
     if jax.default_backend() != "cpu":
         return {}
-    return {**COMPILER_OPTIONS, **FAST_COMPILE_OPTIONS} if compile_mode() == "fast" else COMPILER_OPTIONS
+    fast = compile_mode() == "fast"
+    if dynamics:
+        return dict(FAST_COMPILE_OPTIONS) if fast else {}
+    return {**COMPILER_OPTIONS, **FAST_COMPILE_OPTIONS} if fast else COMPILER_OPTIONS
 
 
-def jit(fun):
-    """`equinox.filter_jit` with jaxrod's XLA options (`compiler_options()`, one compiled
-    variant per compile mode) where the call is not inside a JAX transformation; inside one
-    (where JAX allows no options) the plain `equinox.filter_jit`, so an eager `jax.grad` or
-    `jax.vmap` of an entry point compiles with XLA's defaults. `.lower` picks the same way."""
+def jit(fun, *, dynamics: bool = False):
+    """`equinox.filter_jit` with jaxrod's XLA options (`compiler_options(dynamics)`, one
+    compiled variant per compile mode) where the call is not inside a JAX transformation;
+    inside one (where JAX allows no options) the plain `equinox.filter_jit`, so an eager
+    `jax.grad` or `jax.vmap` of an entry point compiles with XLA's defaults. `.lower` picks
+    the same way."""
     plain = eqx.filter_jit(fun)
     variants = {}
 
     def pick():
         if not _top_level():
             return plain
-        opts = compiler_options()
+        opts = compiler_options(dynamics)
         if not opts:
             return plain
         mode = compile_mode()
@@ -89,6 +97,12 @@ def jit(fun):
 
     wrapper.lower = lambda *args, **kwargs: pick().lower(*args, **kwargs)
     return wrapper
+
+
+def dynamics_jit(fun):
+    """[`jit`][] for the dynamics' programs: XLA's defaults, or `FAST_COMPILE_OPTIONS` in the
+    "fast" compile mode."""
+    return jit(fun, dynamics=True)
 
 
 def traced_once(fun):

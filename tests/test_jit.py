@@ -81,3 +81,20 @@ def test_fast_compile_mode(monkeypatch):
     else:
         raise AssertionError("no ValueError")
     assert main(["equilibrium", "--n", "8", "--json"]) == 2
+
+
+def test_dynamics_programs_keep_xla_loop_passes(monkeypatch):
+    """The dynamics' jit compiles with XLA's defaults (the loop-invariant sine hoisted out of
+    the loop, as without jaxrod's options), and in the fast mode with FAST_COMPILE_OPTIONS
+    alone; the same values either way."""
+    from jaxrod._misc import FAST_COMPILE_OPTIONS, compiler_options, dynamics_jit
+
+    args = (jnp.asarray(2.0), jnp.asarray(3.0))
+    loop = dynamics_jit(_invariant_loop)
+    assert compiler_options(dynamics=True) == {}
+    ref = float(loop(*args))
+    assert not _sine_in_loop_body(loop.lower(*args).compile().compiled.as_text())
+    monkeypatch.setenv("JAXROD_COMPILE", "fast")
+    assert compiler_options(dynamics=True) == FAST_COMPILE_OPTIONS
+    assert not _sine_in_loop_body(loop.lower(*args).compile().compiled.as_text())
+    assert float(loop(*args)) == ref

@@ -66,7 +66,7 @@ from ._simulate import DT_CAP
 from ..energy.contact import safe_norm
 from ..energy.geometry import discretize, scene_dtype
 from ..results import RESULTS
-from .._misc import check_int, check_number
+from .._misc import check_int, check_number, dynamics_jit
 
 
 BODY_COURANT = 0.2
@@ -321,7 +321,7 @@ def _body_omega(bodies, scene):
     return max(math.sqrt(2.0 * k / (delta * lam)), math.sqrt(2.0 * k * math.sqrt(2.0 * r_max * delta) / (delta * m_min)))
 
 
-@eqx.filter_jit
+@dynamics_jit
 def _run(scene, bodies, program, theta0, dissipation, t1, dt, substeps, n_samples, n_frames, energy_tol, quad):
     dtype = theta0.dtype
     d = discretize(scene)

@@ -35,7 +35,7 @@ from ..energy.geometry import discretize
 from ..statics import initial_state
 from ..linalg import kkt
 from ..linalg.batched import solve2
-from .._misc import check_param
+from .._misc import check_param, dynamics_jit
 from ..branches import snap_angles, snap_routes
 from ..results import RESULTS
 from ..energy.bending import bending_energy as _bending
@@ -76,7 +76,7 @@ class Start(eqx.Module):
     ok: jax.Array
 
 
-@eqx.filter_jit
+@dynamics_jit
 def project(theta, scene, steps=8):
     r"""Minimal-norm Gauss-Newton projection onto $\sum_i h_i\mathbf t_i=(G,0)$ (jitted: an
     eager `fori_loop` over a fresh closure would compile again on every call)."""
@@ -138,7 +138,7 @@ def brink(scene, direction="up", *, nudge=NUDGE, past=1e-3, snap=None, route="fi
                         jnp.asarray(nudge, dtype))
 
 
-@eqx.filter_jit
+@dynamics_jit
 def _brink_start(scene, alpha_c, theta_c, force_c, mode, exists, sgn, past, nudge):
     """The brink's start from a refined critical state (`theta_c`, `force_c` at `alpha_c`,
     with its critical `mode`), as one compiled program. The state is used as it is: solving

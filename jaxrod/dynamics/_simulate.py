@@ -41,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._equations import (Dissipation, Protocol, accelerations, check_run_settings, check_scene, kinetic_energy, observables, potential_energy, scene_at)
+from .._misc import dynamics_jit
 from ..energy.geometry import discretize
 from ._rattle import Rattle
 from ..results import RESULTS
@@ -226,7 +227,7 @@ def _verdict(sol, finite):
     return RESULTS.where((res == RESULTS.successful) & ~finite, RESULTS.nonfinite, res)
 
 
-@eqx.filter_jit
+@dynamics_jit
 def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, direction=1.0,
              stop_at_snap: bool = True, solver: str = "rattle", rtol=1e-8, atol=1e-8, dt=None,
              dissipation: Dissipation | None = None, baumgarte=20.0, n_fine: int | None = None,

@@ -99,7 +99,7 @@ import jax.numpy as jnp
 
 from ._scenes import NUDGE, _brink_start, _direction
 from ._simulate import FIXED_STEP, SOLVERS, _rattle_dt_natural, simulate
-from .._misc import check_param
+from .._misc import check_param, dynamics_jit
 from ..branches import snap_angles
 from ..results import RESULTS
 
@@ -277,7 +277,7 @@ def snap_speed(scene, direction="up", *, nudge=NUDGE, past=1e-3, dt=None, t1=2.0
     return _speed_jit(scene, opts)
 
 
-@eqx.filter_jit
+@dynamics_jit
 def _speed_jit(scene, opts):
     return _speed(scene, opts=opts)
 
@@ -289,6 +289,6 @@ def snap_speed_run(scene, direction="up", *, nudge=NUDGE, past=1e-3, dt=None, t1
     return _run_jit(scene, opts)
 
 
-@eqx.filter_jit
+@dynamics_jit
 def _run_jit(scene, opts):
     return _run(scene, *opts)

@@ -415,7 +415,7 @@ def clearance(theta, scene, *, force=None, min_separation: int = 2):
 
 
 def _boxes_apart(x, tol, min_separation):
-    """The $O(N^2)$ comparison screen of the module docstring: True where no two segments
+    r"""The $O(N^2)$ comparison screen of the module docstring: True where no two segments
     $|i-j|\ge$ `min_separation` of the nodes `x` have bounding boxes within `tol` of each
     other (then no two are within `tol`). NaN positions fail it."""
     n = x.shape[-2] - 1
