@@ -45,7 +45,7 @@ s0 = 0.02 L, N = 100, float64):
   (`jaxrod.cli._exported`, beside the XLA cache) and loads on later runs: a warm run traces
   no library code.
 
-Targets (from the issue): `snap_angles`, `phase_diagram`, `snap_dynamics` trace + compile
+Targets (the compile budget): `snap_angles`, `phase_diagram`, `snap_dynamics` trace + compile
 <= 5 s each; `jaxrod snap-angles` <= 3 s wall warm, <= 15 s cold.
 
 `--mode fast` runs every process with `JAXROD_COMPILE=fast` (XLA's -O0 and older loop
@@ -439,7 +439,7 @@ def _markdown(res):
          "first call = trace + compile + run, second call = run; trace + compile = first - second; programs "
          "compiled = XLA programs compiled during the first call (`jax_log_compiles` records; eager operations "
          "count). The CLI is the installed console script, whole-process wall time, cold = empty persistent "
-         "cache, warm = the next run on that cache. Targets from the issue.", "",
+         "cache, warm = the next run on that cache. Targets: the compile budget.", "",
          "| entry point | first call (s) | second call (s) | trace + compile (s) | programs compiled | target | met |",
          "|---|---:|---:|---:|---:|---|---|"]
     for r in res["table"]:
