@@ -438,10 +438,10 @@ def self_intersects(theta, scene, tol=None, *, force=None, min_separation: int =
     theta = jax.lax.stop_gradient(theta)
     force = None if force is None else jax.lax.stop_gradient(force)
     x = _nodes(theta, scene, force)
-    monotone = _screen(x, theta, tol) | _boxes_apart(x, tol, min_separation)
+    screened = _screen(x, theta, tol) | _boxes_apart(x, tol, min_separation)
 
     def full(x, tol):
         c, crosses = segment_distances(x, min_separation)
         return crosses | (c <= tol)
 
-    return run_if(~monotone, full, jnp.zeros((), bool), (x, jnp.asarray(tol, x.dtype)))
+    return run_if(~screened, full, jnp.zeros((), bool), (x, jnp.asarray(tol, x.dtype)))
