@@ -37,7 +37,8 @@ angles $\theta$ and mode angles $v_\theta$ only within $|i-j|\le1$. Three colour
 ($j \bmod 3$) per angle block, one forward-mode probe per remaining column ($\mu$,
 $\alpha$, $v_\mu$) and one reverse-mode probe per remaining row (the constraint rows of
 $F$ and $\mathsf Kv$, $\ell^\top v_\theta$) give every entry: 11 forward and 5 reverse
-probes instead of $2N+5$ forward ones. With self-contact the angle blocks are dense and
+probes for the fold system instead of $2N+5$ forward ones (9 and 3 for the branch-point
+system, 12 and 6 for the cusp's). With self-contact the angle blocks are dense and
 `jax.jacfwd` builds the Jacobian.
 
 **Derivatives.** The Newton iterations run on `stop_gradient`-ed data; the result is
