@@ -234,11 +234,12 @@ def _residual_norm(g, scene):
                        jnp.max(jnp.abs(g[1])) / st.length)
 
 
-def corrector(scene, parameter, x0, lam0, tau, ds, steps, tol):
+def corrector(scene, parameter, x0, lam0, tau, ds, steps, tol, guess=None):
     """Predict by `ds` along `tau` from (x0, lam0) and correct. Returns
     (theta, mu, lam, converged, iterations); `converged` is False also where the corrected
     point lies farther than |ds| from the prediction (in the arclength norm): a jump to
-    another branch."""
+    another branch. `guess` (theta, mu, lam): where Newton starts instead of the prediction
+    (the same equations, the hyperplane `ds` from (x0, lam0) along `tau`)."""
     F, F_lam, Kf = _pieces(scene, parameter)
     d = discretize(scene)
     w = d.h
@@ -265,7 +266,8 @@ def corrector(scene, parameter, x0, lam0, tau, ds, steps, tol):
         finite = jnp.all(jnp.isfinite(t)) & jnp.isfinite(lam)
         return (~conv) & (k < steps) & finite
 
-    t, m, lam, k, conv = lax.while_loop(cond, body, (tp, mp, lp, jnp.zeros((), jnp.int32), jnp.zeros((), bool)))
+    start = (tp, mp, lp) if guess is None else guess
+    t, m, lam, k, conv = lax.while_loop(cond, body, (*start, jnp.zeros((), jnp.int32), jnp.zeros((), bool)))
     # a correction longer than the step itself left the branch for another one (at Psi0 =
     # 60 deg, G/L = 0.075 with contact, a step of 0.025 landed 0.42 away, on an unstable
     # branch 18 deg back): not converged, so the step is halved

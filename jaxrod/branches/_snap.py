@@ -126,12 +126,17 @@ def _refine(scene, parameter, branch, settings, tol, bisections):
     ds_b = branch.ds[i]
 
     # `bisections` halvings, then one more pass that corrects at `hi`, the state just past
-    # the critical point (whose lowest mode tells the kind): one corrector call site
+    # the critical point (whose lowest mode tells the kind): one corrector call site. Each
+    # correction starts from the last stable state moved along the tangent to `s`, at most
+    # the bracket's width away (the prediction from `a` is up to the whole step away), so it
+    # takes fewer Newton iterations to the same point
     def body(k, c):
         lo, hi, best, after = c
         last = k == bisections
         s = jnp.where(last, hi, 0.5 * (lo + hi))
-        t, m, lam, conv, _ = corrector(scene, parameter, (ta, ma), la, tau, s, settings.steps_for(scene), tol)
+        guess = tuple(b + (s - lo) * d for b, d in zip(best, tau))
+        t, m, lam, conv, _ = corrector(scene, parameter, (ta, ma), la, tau, s, settings.steps_for(scene), tol,
+                                       guess)
         nu = kkt.count_below(Kf(t, m, lam), jnp.zeros(1, t.dtype))[0]
         stable_side = conv & (nu == nu_a) & ~last
         lo = jnp.where(stable_side, s, lo)
