@@ -57,15 +57,16 @@ def compile_mode() -> str:
     return mode
 
 
-def compiler_options(dynamics: bool = False) -> dict:
+def compiler_options(dynamics: bool = False, mode: str | None = None) -> dict:
     """`COMPILER_OPTIONS` (plus `FAST_COMPILE_OPTIONS` in the "fast" `compile_mode`) where
     JAX's default backend is the CPU (where they were measured), XLA's defaults on
     accelerators. `dynamics`: the options of the dynamics' programs, XLA's defaults in the
     "optimized" mode (their step loops run slower without the disabled passes) and
-    `FAST_COMPILE_OPTIONS` alone in the "fast" one."""
+    `FAST_COMPILE_OPTIONS` alone in the "fast" one. `mode`: the compile mode, default
+    `compile_mode()`."""
     if jax.default_backend() != "cpu":
         return {}
-    fast = compile_mode() == "fast"
+    fast = (compile_mode() if mode is None else mode) == "fast"
     if dynamics:
         return dict(FAST_COMPILE_OPTIONS) if fast else {}
     return {**COMPILER_OPTIONS, **FAST_COMPILE_OPTIONS} if fast else COMPILER_OPTIONS
@@ -83,10 +84,10 @@ def jit(fun, *, dynamics: bool = False):
     def pick():
         if not _top_level():
             return plain
-        opts = compiler_options(dynamics)
+        mode = compile_mode()
+        opts = compiler_options(dynamics, mode)
         if not opts:
             return plain
-        mode = compile_mode()
         if mode not in variants:
             variants[mode] = eqx.filter_jit(fun, compiler_options=opts)
         return variants[mode]

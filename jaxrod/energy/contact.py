@@ -438,10 +438,15 @@ def self_intersects(theta, scene, tol=None, *, force=None, min_separation: int =
     theta = jax.lax.stop_gradient(theta)
     force = None if force is None else jax.lax.stop_gradient(force)
     x = _nodes(theta, scene, force)
-    screened = _screen(x, theta, tol) | _boxes_apart(x, tol, min_separation)
+    monotone = _screen(x, theta, tol)
+    no = jnp.zeros((), bool)
 
-    def full(x, tol):
+    def distances(x, tol):
         c, crosses = segment_distances(x, min_separation)
         return crosses | (c <= tol)
 
-    return run_if(~screened, full, jnp.zeros((), bool), (x, jnp.asarray(tol, x.dtype)))
+    def boxes_then_distances(x, tol):
+        # the second screen only where the first fails (most states pass the first)
+        return run_if(~_boxes_apart(x, tol, min_separation), distances, no, (x, tol))
+
+    return run_if(~monotone, boxes_then_distances, no, (x, jnp.asarray(tol, x.dtype)))
