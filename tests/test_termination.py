@@ -161,6 +161,7 @@ def test_termination_codes_follow_the_evaluations(monkeypatch):
                ok(lambda g: g < 0.3))
     assert result_name(jr.termination_gap(60.0, tol=1e-3).result_up) == "no_snap"
 
+
 def test_contact_reaches_every_evaluation(monkeypatch):
     """`termination_gap(..., contact=...)` evaluates every gap of its scan and bisection on a
     scene with that contact model (stand-in criterion; the search with the real contact
