@@ -83,6 +83,7 @@ from .branches import KIND_NAMES as KIND_NAMES
 from .branches import LeftAlpha as LeftAlpha
 from .branches import phase_diagram as phase_diagram
 from .branches import refined_scene as refined_scene
+from .branches import extrapolate_path as extrapolate_path
 from .branches import richardson as richardson
 from .branches import RightAlpha as RightAlpha
 from .branches import Route as Route

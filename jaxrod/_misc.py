@@ -36,6 +36,55 @@ def _top_level() -> bool:
     return trace_state_clean()
 
 
+_POOL = None
+_MISMATCH = object()
+
+
+def _trace_context():
+    """JAX's thread-local configuration (`jax.enable_x64` and the other context managers),
+    or None for a JAX without that accessor."""
+    try:
+        from jax._src.config import trace_context
+    except ImportError:
+        return None
+    return trace_context()
+
+
+def _in_worker(call, context):
+    if context is None or _trace_context() != context:
+        return _MISMATCH  # a thread-local setting of the caller's that this thread lacks
+    return call()
+
+
+def concurrently(*calls):
+    """The results of the zero-argument `calls`, in order, computed concurrently where that
+    is safe and useful: at the top level (no JAX transformation tracing) on a machine with
+    more than one core, the first on the calling thread and each other on a worker thread.
+
+    XLA:CPU runs the thunks of one program one after the other on the thread that calls it,
+    and runs two independent computations inside one program one after the other too, so
+    two independent programs (the coarse and the fine mesh of
+    [`jaxrod.snap_angles_extrapolated`][]) take the time of the slower one instead of the sum
+    this way, and their first calls compile concurrently (XLA compiles without Python's
+    lock; the tracing before it takes turns). A worker whose thread-local JAX configuration
+    differs from the caller's (a `with jax.enable_x64(...)` block is thread-local) hands its
+    call back to the calling thread; under a transformation, or with one core, the calls run
+    one after the other. Exceptions reach the caller as they would from a plain call."""
+    global _POOL
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if len(calls) < 2 or cores < 2 or not _top_level():
+        return tuple(call() for call in calls)
+    if _POOL is None:
+        import concurrent.futures
+
+        _POOL = concurrent.futures.ThreadPoolExecutor(max_workers=3, thread_name_prefix="jaxrod")
+    context = _trace_context()
+    futures = [_POOL.submit(_in_worker, call, context) for call in calls[1:]]
+    first = calls[0]()
+    rest = [f.result() for f in futures]
+    return (first,) + tuple(call() if r is _MISMATCH else r for call, r in zip(calls[1:], rest))
+
+
 FAST_COMPILE_OPTIONS = {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False}
 """Added to `COMPILER_OPTIONS` in the "fast" compile mode (`compile_mode`): LLVM at -O0 and
 XLA's older loop emitters instead of its MLIR fusion emitters, whose own lowering pipeline is

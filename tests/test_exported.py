@@ -93,3 +93,19 @@ def test_cli_query_answered_from_the_exported_program(tmp_path):
     ref = jr.snap_angles(jr.make_scene(60.0, 0.5, n=12))
     for name in ("up", "down"):
         assert first[f"alpha_c_{name}_deg"] == pytest.approx(np.degrees(float(getattr(ref, name).alpha_c)), abs=1e-9)
+    # extrapolated (the default): one program per mesh, run concurrently; the second process
+    # loads both, and both print `snap_angles_extrapolated`'s numbers
+    runs = [subprocess.run(args[:-2] + ["--json"], capture_output=True, text=True, env=env, timeout=600)
+            for _ in range(2)]
+    for r in runs:
+        assert r.returncode == 0, r.stderr
+    first, second = (json.loads(r.stdout) for r in runs)
+    assert first == second
+    assert len(os.listdir(tmp_path / "jaxrod" / "exported")) == 3
+    ref = jr.snap_angles_extrapolated(jr.make_scene(60.0, 0.5, n=12))
+    for name in ("up", "down"):
+        e = getattr(ref, name)
+        assert first[f"alpha_c_{name}_deg"] == pytest.approx(np.degrees(float(e.alpha_c)), abs=1e-9)
+        assert first[f"alpha_c_{name}_deg_n_fine"] == pytest.approx(np.degrees(float(e.alpha_c_fine)), abs=1e-9)
+        assert first[f"error_estimate_{name}_deg"] == pytest.approx(np.degrees(float(e.error)), abs=1e-9)
+        assert first[f"result_{name}"] == jr.result_name(e.result)

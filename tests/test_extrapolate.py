@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import jaxrod as jr
-from jaxrod.branches._extrapolate import _combine
+from jaxrod.branches import extrapolate_path
 
 
 jax.config.update("jax_enable_x64", True)
@@ -51,29 +51,29 @@ def _fake(snaps, kind, alpha, result=jr.RESULTS.successful, start=jr.RESULTS.suc
 
 def test_combination_and_fallback():
     # consistent: (4 a_f - a_c) / 3, error |a_f - a_c| / 3
-    e = _combine(_fake(True, 1, 1.0), _fake(True, 1, 1.3))
+    e = extrapolate_path(_fake(True, 1, 1.0), _fake(True, 1, 1.3))
     assert bool(e.consistent) and abs(float(e.alpha_c) - 1.4) < 1e-12 and abs(float(e.error) - 0.1) < 1e-12
     assert e.result == jr.RESULTS.successful
     # kinds differ (a fold and a branch point crossing between the meshes): fine value, full difference
-    e = _combine(_fake(True, 1, 1.0), _fake(True, 2, 1.3))
+    e = extrapolate_path(_fake(True, 1, 1.0), _fake(True, 2, 1.3))
     assert not bool(e.consistent) and float(e.alpha_c) == 1.3 and abs(float(e.error) - 0.3) < 1e-12
     assert e.result == jr.RESULTS.mesh_inconsistent
     # with self-contact, a contact click more on one mesh: its snap is another loss of stability
-    e = _combine(_fake(True, 1, 1.0, clicks=1), _fake(True, 1, 1.3))
+    e = extrapolate_path(_fake(True, 1, 1.0, clicks=1), _fake(True, 1, 1.3))
     assert not bool(e.consistent) and float(e.alpha_c) == 1.3 and e.result == jr.RESULTS.mesh_inconsistent
     # one mesh snaps, the other does not (near a termination gap): fine mesh's answer, unknown error
-    e = _combine(_fake(True, 1, 1.0), _fake(False, 0, jnp.nan))
+    e = extrapolate_path(_fake(True, 1, 1.0), _fake(False, 0, jnp.nan))
     assert not bool(e.consistent) and not bool(e.snaps) and np.isnan(float(e.alpha_c)) and np.isnan(float(e.error))
     assert e.result == jr.RESULTS.mesh_inconsistent
     # neither snaps: no snap, zero error
-    e = _combine(_fake(False, 0, jnp.nan), _fake(False, 0, jnp.nan))
+    e = extrapolate_path(_fake(False, 0, jnp.nan), _fake(False, 0, jnp.nan))
     assert bool(e.consistent) and not bool(e.snaps) and float(e.error) == 0.0
     assert e.result == jr.RESULTS.successful
     # a code of either mesh is the path's code (the fine mesh's first), never a clean "no snap"
     bad = jr.RESULTS.continuation_incomplete
-    e = _combine(_fake(False, 0, jnp.nan, result=bad), _fake(False, 0, jnp.nan))
+    e = extrapolate_path(_fake(False, 0, jnp.nan, result=bad), _fake(False, 0, jnp.nan))
     assert e.result == bad and e.result_coarse == bad and e.result_fine == jr.RESULTS.successful
-    e = _combine(_fake(False, 0, jnp.nan), _fake(False, 0, jnp.nan, result=jr.RESULTS.landing_failed,
+    e = extrapolate_path(_fake(False, 0, jnp.nan), _fake(False, 0, jnp.nan, result=jr.RESULTS.landing_failed,
                                                  start=jr.RESULTS.start_substituted))
     assert e.result == jr.RESULTS.landing_failed and e.start_result == jr.RESULTS.start_substituted
 

@@ -98,3 +98,54 @@ def test_dynamics_programs_keep_xla_loop_passes(monkeypatch):
     assert compiler_options(dynamics=True) == FAST_COMPILE_OPTIONS
     assert not _sine_in_loop_body(loop.lower(*args).compile().compiled.as_text())
     assert float(loop(*args)) == ref
+
+
+def test_concurrently_runs_calls_in_threads_and_keeps_their_meaning(monkeypatch):
+    """`concurrently`: results in order; calls on other threads where the machine has cores
+    (each program runs on its caller's thread); a worker without the caller's thread-local
+    JAX configuration hands its call back; exceptions reach the caller; under a
+    transformation (or on one core) the calls run one after the other on the caller's
+    thread."""
+    import threading
+
+    from jaxrod import _misc
+
+    monkeypatch.setattr(_misc.os, "sched_getaffinity", lambda _: {0, 1}, raising=False)
+    monkeypatch.setattr(_misc.os, "cpu_count", lambda: 2)
+    a = jnp.asarray(2.0)
+    names = []
+
+    def call(x):
+        names.append(threading.current_thread().name)
+        return _newton_sqrt(x)
+
+    r = _misc.concurrently(lambda: call(a), lambda: call(a + 7.0), lambda: call(a + 14.0))
+    np.testing.assert_allclose(r, [np.sqrt(2.0), 3.0, 4.0], rtol=1e-15)
+    assert threading.current_thread().name in names  # the first call ran on the caller's thread ...
+    assert len(set(names)) >= 2, names  # ... and the others on worker threads
+    # a thread-local configuration is honoured: the worker gives the call back
+    with jax.enable_x64(False):
+        dtypes = _misc.concurrently(lambda: jnp.ones(2).dtype, lambda: jnp.ones(2).dtype)
+    assert dtypes == (jnp.float32, jnp.float32)
+    with jax.enable_x64(True):
+        assert _misc.concurrently(lambda: jnp.ones(2).dtype, lambda: jnp.ones(2).dtype) == (jnp.float64,) * 2
+
+    def fails():
+        raise ValueError("psi0 must be finite")
+
+    try:
+        _misc.concurrently(lambda: 1, fails)
+    except ValueError as e:
+        assert "psi0" in str(e)
+    else:
+        raise AssertionError("the worker's exception did not reach the caller")
+    # under jit: one thread, and the values are those of the plain calls
+    names.clear()
+    out = jax.jit(lambda x: jnp.stack(_misc.concurrently(lambda: call(x), lambda: call(x + 7.0))))(a)
+    np.testing.assert_allclose(out, [np.sqrt(2.0), 3.0], rtol=1e-15)
+    assert set(names) == {threading.current_thread().name}
+    # one core: one thread
+    monkeypatch.setattr(_misc.os, "sched_getaffinity", lambda _: {0}, raising=False)
+    names.clear()
+    _misc.concurrently(lambda: call(a), lambda: call(a))
+    assert set(names) == {threading.current_thread().name}

@@ -150,7 +150,7 @@ def test_extrapolated_paths_carry_both_meshes_codes():
     both meshes' own codes. (The combination of two runs by `snap_angles_extrapolated` is
     checked end to end in test_extrapolate.py; the cut-short path here is test_snap.py's
     compiled program, N = 40 with a 3-point buffer.)"""
-    from jaxrod.branches._extrapolate import _combine
+    from jaxrod.branches import extrapolate_path
 
     cut = jr.snap_angles(jr.make_scene(60.0, 0.5, 0.0, n=40), settings=jr.Continuation(max_points=3), polish=False)
     good = _snap(60.0, 0.5)
@@ -159,10 +159,10 @@ def test_extrapolated_paths_carry_both_meshes_codes():
         c, g = getattr(cut, name), getattr(good, name)
         assert c.result == incomplete and g.result == OK and bool(g.snaps) and not bool(c.snaps)
         for coarse, fine in ((c, c), (g, c), (c, g)):
-            e = _combine(coarse, fine)
+            e = extrapolate_path(coarse, fine)
             assert e.result == incomplete
             assert e.result_coarse == coarse.result and e.result_fine == fine.result
-        e = _combine(g, g)
+        e = extrapolate_path(g, g)
         assert e.result == OK and bool(e.consistent)
 
 

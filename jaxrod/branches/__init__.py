@@ -27,6 +27,7 @@ from ._critical_curve import continue_critical as continue_critical
 from ._critical_curve import CriticalCurve as CriticalCurve
 from ._extrapolate import ExtrapolatedPath as ExtrapolatedPath
 from ._extrapolate import ExtrapolatedSnapAngles as ExtrapolatedSnapAngles
+from ._extrapolate import extrapolate_path as extrapolate_path
 from ._extrapolate import refined_scene as refined_scene
 from ._extrapolate import richardson as richardson
 from ._extrapolate import snap_angles_extrapolated as snap_angles_extrapolated

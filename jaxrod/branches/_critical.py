@@ -188,20 +188,86 @@ def _structured_jacobian(res, z, n, row_starts, col_starts):
     return J.at[dense_rows].set(rows)
 
 
+def _layout(N, kind):
+    """`(n, row_starts, col_starts)` of the extended system `kind` of a scene with N segments:
+    its two angle-like blocks of `n` unknowns and of `n` equations (see `_structured_jacobian`)."""
+    if kind == "sym":
+        H = N // 2
+        return H, (0, H + 1), (0, H + 2)
+    return N, (0, N + 2), (0, N + 3)
+
+
 def _jacobian_fn(res, scene, N, kind):
     """z -> the Jacobian of the extended system `kind` ("fold", "sym" or "cusp") of a
     scene with N segments: structured (`_structured_jacobian`) without self-contact,
     `jax.jacfwd` with it (dense angle blocks)."""
     if scene.contact is not None:
         return jax.jacfwd(res)
-    if kind == "sym":
-        H = N // 2
-        return lambda y: _structured_jacobian(res, y, H, (0, H + 1), (0, H + 2))
-    return lambda z: _structured_jacobian(res, z, N, (0, N + 2), (0, N + 3))
+    n, rows, cols = _layout(N, kind)
+    return lambda z: _structured_jacobian(res, z, n, rows, cols)
 
 
-def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True, jac=None):
-    """Plain Newton on res(z) = 0 with dense Jacobians (`jac`, default `jax.jacfwd(res)`).
+def _block_solve(J, r, n, row_starts, col_starts):
+    r"""$J^{-1} r$ for an extended-system Jacobian of the layout of `_structured_jacobian`,
+    in $O(n)$ instead of a dense LU's $O(n^3)$.
+
+    Ordered as (angle-like rows and columns, the rest), $J=egin{pmatrix}A&U\W&D\end{pmatrix}$
+    with $A=egin{pmatrix}T_0&0\B&T_1\end{pmatrix}$: $T_0=\partial F_	heta/\partial	heta$,
+    $B=\partial(\mathsf Kv)_	heta/\partial	heta$, $T_1=\partial(\mathsf Kv)_	heta/\partial v_	heta$
+    tridiagonal, and $F$ independent of $v$ (the zero block). $A^{-1}$ is two tridiagonal
+    solves (LAPACK `gtsv`), the few remaining unknowns ($\mu$, $lpha$, $v_\mu$; the gap of a
+    cusp) come from the small Schur complement $S=D-WA^{-1}U$, and one step of iterative
+    refinement with $J$ itself keeps the result at the accuracy of a dense LU where $T_0$ or
+    $T_1$ is ill-conditioned (the same block elimination as the continuation's corrector).
+    $J$ itself is singular only where the extended system is (not at a regular root)."""
+    M = J.shape[0]
+    j = np.arange(n)
+    (r0, r1), (c0, c1) = row_starts, col_starts
+    local_rows = np.concatenate([r0 + j, r1 + j])
+    local_cols = np.concatenate([c0 + j, c1 + j])
+    dense_rows = np.setdiff1d(np.arange(M), local_rows)
+    dense_cols = np.setdiff1d(np.arange(M), local_cols)
+    zero = jnp.zeros((), J.dtype)
+
+    def tri(r, c):
+        lower = jnp.where(j > 0, J[r + j, c + np.maximum(j - 1, 0)], zero)
+        upper = jnp.where(j < n - 1, J[r + j, c + np.minimum(j + 1, n - 1)], zero)
+        return lower, J[r + j, c + j], upper
+
+    T0, B, T1 = tri(r0, c0), tri(r1, c0), tri(r1, c1)
+    U = J[np.ix_(local_rows, dense_cols)]
+    W = J[np.ix_(dense_rows, local_cols)]
+    D = J[np.ix_(dense_rows, dense_cols)]
+
+    def solve_a(R):
+        X0 = batched.tridiagonal_solve(*T0, R[:n])
+        return jnp.concatenate([X0, batched.tridiagonal_solve(*T1, R[n:] - batched.tridiagonal_matvec(*B, X0))])
+
+    XU = solve_a(U)
+    S = D - W @ XU
+
+    def once(rhs):
+        xr = solve_a(rhs[local_rows][:, None])[:, 0]
+        yd = batched.solve(S, rhs[dense_rows] - W @ xr)
+        yl = xr - XU @ yd
+        return jnp.zeros(M, J.dtype).at[local_cols].set(yl).at[dense_cols].set(yd)
+
+    x = once(r)
+    return x + once(r - J @ x)
+
+
+def _solver_fn(scene, N, kind):
+    """(J, r) -> J^{-1} r for the extended system `kind`: `_block_solve` without self-contact,
+    one dense LU with it (dense angle blocks)."""
+    if scene.contact is not None:
+        return batched.solve
+    n, rows, cols = _layout(N, kind)
+    return lambda J, r: _block_solve(J, r, n, rows, cols)
+
+
+def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True, jac=None, solve=batched.solve):
+    """Plain Newton on res(z) = 0 with dense Jacobians (`jac`, default `jax.jacfwd(res)`),
+    each step `solve(J, -res(z))` (default: a dense LU).
 
     Returns `(z, k, done, J)`: `J` the Jacobian at the returned `z` (the implicit step's),
     from one last pass of the loop that evaluates it and takes no step, so that one copy of
@@ -220,7 +286,7 @@ def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True, jac=None):
         z, k, done, _, _ = c
         J = jac(z)
         last = done | (k >= max_steps)  # J is the Jacobian at the returned z: no step
-        dz = lax.cond(last, lambda: jnp.zeros_like(z), lambda: batched.solve(J, -res(z)))
+        dz = lax.cond(last, lambda: jnp.zeros_like(z), lambda: solve(J, -res(z)))
         converged = (jnp.abs(dz[idx_alpha]) < tol_alpha) & (jnp.max(jnp.abs(dz)) < 1e3 * tol_alpha)
         return z + dz, k + jnp.where(last, 0, 1), done | (~last & converged), J, last
 
@@ -231,9 +297,9 @@ def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True, jac=None):
     return z, k, done & active, J
 
 
-def _implicit_step(res_p, z, jac_z):
+def _implicit_step(res_p, z, jac_z, solve=batched.solve):
     """z - J^{-1} R(z; p) with J frozen: value z (at a root), derivative -J^{-1} dR/dp."""
-    return z - batched.solve(lax.stop_gradient(jac_z), res_p(z))
+    return z - solve(lax.stop_gradient(jac_z), res_p(z))
 
 
 def extended_jacobian(scene, cp: CriticalPoint, parameter: AbstractParameter = SymmetricAlpha()):
@@ -305,8 +371,10 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
             unpack = _sym_unpack
             ia = N // 2 + 1
         active = (kind == which) | (len(outs_kinds) == 1)
-        jac = _jacobian_fn(lambda z: res(z, scene_sg), scene_sg, N, "fold" if which == KIND_FOLD else "sym")
-        z, k, done, J = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, ia, active, jac)
+        system = "fold" if which == KIND_FOLD else "sym"
+        jac = _jacobian_fn(lambda z: res(z, scene_sg), scene_sg, N, system)
+        solve = _solver_fn(scene_sg, N, system)
+        z, k, done, J = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, ia, active, jac, solve)
         finite = jnp.all(jnp.isfinite(z))
         # The system not selected by `kind` (and a failed one) is singular or non-finite: its
         # derivative step uses the start point and the identity, so that no NaN reaches the
@@ -320,7 +388,7 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
         sc_d = scene if which == KIND_FOLD else mirror_symmetric_part(scene)
         # the unselected system skips its solve (under `vmap` the `cond` runs both branches,
         # and the identity above keeps that branch finite)
-        z_imp = lax.cond(active & finite, lambda zu: _implicit_step(lambda z: res(z, sc_d), zu, J),
+        z_imp = lax.cond(active & finite, lambda zu: _implicit_step(lambda z: res(z, sc_d), zu, J, solve),
                          lambda zu: zu, sg(z_use))
         z = jnp.where(active & finite, z_imp, z)
         t, m, a, vt, vm = unpack(z, N)
@@ -424,12 +492,13 @@ def cusp_point(scene, theta, force, alpha, mode, *, parameter: AbstractParameter
         return _cusp_residual(z, sc, parameter, ell)
 
     jac = _jacobian_fn(lambda z: res(z, scene_sg), scene_sg, N, "cusp")
-    z, k, done, J = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, 2 * N + 5, jac=jac)
+    solve = _solver_fn(scene_sg, N, "cusp")
+    z, k, done, J = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, 2 * N + 5, jac=jac, solve=solve)
     finite = jnp.all(jnp.isfinite(z))
     z_use = jnp.where(finite, z, z0)
     J = jnp.where(finite & jnp.all(jnp.isfinite(J)), J, jnp.eye(J.shape[0], dtype=dtype))
     r = jnp.max(jnp.abs(res(z, scene_sg)))
-    z = jnp.where(finite, _implicit_step(lambda z: res(z, scene), sg(z_use), J), z)
+    z = jnp.where(finite, _implicit_step(lambda z: res(z, scene), sg(z_use), J, solve), z)
     t, m, a, vt, vm = _fold_unpack(z[:-1], N)
     result = RESULTS.where(done & finite, RESULTS.successful,
                            RESULTS.where(finite, RESULTS.max_steps_reached, RESULTS.nonfinite))

@@ -28,6 +28,7 @@ from jaxtyping import Array
 
 from ..model import Mesh, Scene
 from ._snap import SnapAngles, SnapPath, snap_angles
+from .._misc import concurrently
 from ..results import RESULTS
 
 
@@ -91,7 +92,12 @@ def richardson(coarse, fine, factor: int = 2):
     return fine + (fine - coarse) / (factor**ORDER - 1.0)
 
 
-def _combine(c: SnapPath, f: SnapPath) -> ExtrapolatedPath:
+def extrapolate_path(c: SnapPath, f: SnapPath) -> ExtrapolatedPath:
+    r"""One path of [`snap_angles_extrapolated`][] from its coarse (`c`, $N$) and fine (`f`,
+    $2N$) [`jaxrod.SnapPath`][]s (module docstring). Reads their `snaps`, `kind`, `clicks`,
+    `alpha_c`, `fold_height_before`, `fold_height_after`, `result`, `start_result` and
+    `refine_result` only, so the two may also come from separate programs (the CLI runs the
+    meshes as two)."""
     r = 2.0**ORDER - 1.0
     consistent = (c.snaps == f.snaps) & (c.kind == f.kind) & (c.clicks == f.clicks)
     both = consistent & f.snaps
@@ -125,14 +131,17 @@ def _combine(c: SnapPath, f: SnapPath) -> ExtrapolatedPath:
 def snap_angles_extrapolated(scene: Scene, *, continue_after_snap: bool = False, **kwargs) -> ExtrapolatedSnapAngles:
     r"""[`jaxrod.snap_angles`][] on the scene's mesh ($N$) and on one twice as fine, and
     their Richardson extrapolation (module docstring). `kwargs` go to `snap_angles`.
-    Costs one `snap_angles` at $N$ plus one at $2N$ (two compilations on first use).
+    Costs one `snap_angles` at $N$ plus one at $2N$ (two compilations on first use); called
+    outside `jit` and other transformations on a machine with two or more cores, the two run
+    (and compile) concurrently (`jaxrod._misc.concurrently`): about the time of the fine mesh
+    alone.
 
     `continue_after_snap` defaults to False here: the landed branch after each snap (the
     post-snap stage of the hysteresis figures) does not change the critical angles or the
     landed states, and skipping it saves about a quarter of the run (N = 60 + 120: 116 ms ->
     85 ms on 2 cores); pass True to keep it in `coarse` and `fine`."""
-    coarse = snap_angles(scene, continue_after_snap=continue_after_snap, **kwargs)
     fine_scene = refined_scene(scene)
-    fine = snap_angles(fine_scene, continue_after_snap=continue_after_snap, **kwargs)
-    return ExtrapolatedSnapAngles(up=_combine(coarse.up, fine.up), down=_combine(coarse.down, fine.down),
+    fine, coarse = concurrently(lambda: snap_angles(fine_scene, continue_after_snap=continue_after_snap, **kwargs),
+                                lambda: snap_angles(scene, continue_after_snap=continue_after_snap, **kwargs))
+    return ExtrapolatedSnapAngles(up=extrapolate_path(coarse.up, fine.up), down=extrapolate_path(coarse.down, fine.down),
                                   coarse=coarse, fine=fine, n_coarse=scene.mesh.n, n_fine=fine_scene.mesh.n)

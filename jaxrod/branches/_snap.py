@@ -149,8 +149,7 @@ def _refine(scene, parameter, branch, settings, tol, bisections):
     lo, hi, (t, m, lam), (t2, m2, l2) = lax.fori_loop(0, bisections + 1, body,
                                                       (jnp.zeros_like(ds_b), ds_b, start, start))
     K2 = Kf(t2, m2, l2)
-    lam_min = kkt.smallest_eigenvalues(K2, 1)
-    v = kkt.modes(K2, lam_min)[:, 0]
+    v = kkt.critical_mode(K2)
     tl_c = _tangent(Kf(t, m, lam), F_lam(t, m, lam), w * tau[0], tau[2], w)[2]
     return t, m, lam, v, tl_c
 
@@ -434,7 +433,7 @@ def _polish(scene_d, path, parameter):
     a0 = jnp.where(path.snaps, path.alpha_c, 0.0)
     sc = parameter.set(sg(scene_d), a0)
     K = kkt.structured(path.theta_before, path.force_before, sc)
-    v = kkt.modes(K, kkt.smallest_eigenvalues(K, 1))[:, 0]
+    v = kkt.critical_mode(K)
     kind = jnp.where(path.kind == KIND_NONE, KIND_FOLD, path.kind)
     cp = critical_point(scene_d, path.theta_before, path.force_before, a0, v, kind, parameter=parameter)
     # accept only a converged refinement that stays at the bisection point (1e-6 rad)

@@ -486,9 +486,10 @@ def clearance_separation(n):
     return max(2, -(-n // 10))
 
 
-def _snap_arrays(scene, extrapolate):
-    """What `jaxrod snap-angles` prints, as a flat dict of arrays (one jittable function of
-    the scene, exported by `_exported.call`)."""
+def _snap_arrays(scene, continue_after_snap=True):
+    """What `jaxrod snap-angles` prints about one mesh, as a flat dict of arrays (one
+    jittable function of the scene, exported by `_exported.call`): both paths' snap
+    angles, their second critical points (`jaxrod.snap_routes`) and clearances."""
     import jax.numpy as jnp
 
     import jaxrod as jr
@@ -504,36 +505,55 @@ def _snap_arrays(scene, extrapolate):
         c = jnp.stack([jnp.where(jnp.isfinite(x), x, jnp.inf) for x in c])
         return jnp.where(p.snaps, jnp.min(c), c[0]) / sc.strip.length
 
+    r = jr.snap_angles(scene, continue_after_snap=continue_after_snap)
+    routes = jr.snap_routes(scene, snap=r)
     out = {}
-    if extrapolate:
-        x = jr.snap_angles_extrapolated(scene)
-        sc_f = jr.refined_scene(scene, x.n_fine // x.n_coarse)
-        rc, rf = jr.snap_routes(scene, snap=x.coarse), jr.snap_routes(sc_f, snap=x.fine)
-        for name in ("up", "down"):
-            e, p = getattr(x, name), getattr(x.fine, name)
-            c2, f2 = getattr(rc, name), getattr(rf, name)
-            both = (c2.kind2 == f2.kind2) & (f2.kind2 != 0)
-            a2 = jnp.where(both, jr.richardson(c2.alpha_c2, f2.alpha_c2, x.n_fine // x.n_coarse), f2.alpha_c2)
-            out.update({f"alpha_c_{name}": e.alpha_c, f"kind_{name}": p.kind,
-                        f"fold_height_before_{name}": e.fold_height_before,
-                        f"fold_height_after_{name}": e.fold_height_after,
-                        f"start_{name}": code(e.start_result), f"result_{name}": code(e.result),
-                        f"alpha_c_{name}_n": e.alpha_c_coarse, f"alpha_c_{name}_n_fine": e.alpha_c_fine,
-                        f"error_{name}": e.error, f"consistent_{name}": e.consistent,
-                        f"alpha_c2_{name}": a2, f"kind2_{name}": f2.kind2, f"result2_{name}": code(f2.result),
-                        f"clearance_{name}": clearance(p, sc_f), f"clicks_{name}": p.clicks})
-    else:
-        r = jr.snap_angles(scene)
-        routes = jr.snap_routes(scene, snap=r)
-        for name in ("up", "down"):
-            p, q = getattr(r, name), getattr(routes, name)
-            out.update({f"alpha_c_{name}": p.alpha_c, f"kind_{name}": p.kind,
-                        f"fold_height_before_{name}": p.fold_height_before,
-                        f"fold_height_after_{name}": p.fold_height_after,
-                        f"start_{name}": code(p.start_result), f"result_{name}": code(p.result),
-                        f"alpha_c2_{name}": q.alpha_c2, f"kind2_{name}": q.kind2, f"result2_{name}": code(q.result),
-                        f"clearance_{name}": clearance(p, scene), f"clicks_{name}": p.clicks})
+    for name in ("up", "down"):
+        p, q = getattr(r, name), getattr(routes, name)
+        out.update({f"alpha_c_{name}": p.alpha_c, f"kind_{name}": p.kind, f"snaps_{name}": p.snaps,
+                    f"fold_height_before_{name}": p.fold_height_before,
+                    f"fold_height_after_{name}": p.fold_height_after,
+                    f"start_{name}": code(p.start_result), f"result_{name}": code(p.result),
+                    f"refine_{name}": code(p.refine_result),
+                    f"alpha_c2_{name}": q.alpha_c2, f"kind2_{name}": q.kind2, f"result2_{name}": code(q.result),
+                    f"clearance_{name}": clearance(p, scene), f"clicks_{name}": p.clicks})
     return out
+
+
+def _extrapolated_arrays(coarse, fine, factor=2):
+    """`jaxrod.snap_angles_extrapolated`'s values from the two meshes' `_snap_arrays`
+    (`jaxrod.extrapolate_path`), the second critical points extrapolated where both meshes
+    find one of the same kind, the clearances of the fine mesh."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    import jaxrod as jr
+    from ..results import result_from_name, result_name
+
+    def path(d, name):
+        codes = {k: result_from_name(result_name(d[f"{k}_{name}"])) for k in ("result", "start", "refine")}
+        return SimpleNamespace(snaps=d[f"snaps_{name}"], kind=d[f"kind_{name}"], clicks=d[f"clicks_{name}"],
+                               alpha_c=d[f"alpha_c_{name}"], fold_height_before=d[f"fold_height_before_{name}"],
+                               fold_height_after=d[f"fold_height_after_{name}"], result=codes["result"],
+                               start_result=codes["start"], refine_result=codes["refine"])
+
+    out = {}
+    for name in ("up", "down"):
+        e = jr.extrapolate_path(path(coarse, name), path(fine, name))
+        both = (coarse[f"kind2_{name}"] == fine[f"kind2_{name}"]) & (fine[f"kind2_{name}"] != 0)
+        a2 = np.where(both, jr.richardson(coarse[f"alpha_c2_{name}"], fine[f"alpha_c2_{name}"], factor),
+                      fine[f"alpha_c2_{name}"])
+        out.update({f"alpha_c_{name}": e.alpha_c, f"kind_{name}": fine[f"kind_{name}"],
+                    f"fold_height_before_{name}": e.fold_height_before,
+                    f"fold_height_after_{name}": e.fold_height_after,
+                    f"start_{name}": e.start_result._value, f"result_{name}": e.result._value,
+                    f"alpha_c_{name}_n": e.alpha_c_coarse, f"alpha_c_{name}_n_fine": e.alpha_c_fine,
+                    f"error_{name}": e.error, f"consistent_{name}": e.consistent,
+                    f"alpha_c2_{name}": a2, f"kind2_{name}": fine[f"kind2_{name}"],
+                    f"result2_{name}": fine[f"result2_{name}"], f"clearance_{name}": fine[f"clearance_{name}"],
+                    f"clicks_{name}": fine[f"clicks_{name}"]})
+    return {k: np.asarray(v) for k, v in out.items()}
 
 
 def _cmd_snap_angles(args):
@@ -545,13 +565,22 @@ def _cmd_snap_angles(args):
     import jaxrod as jr
     from . import _exported
 
-    # one exported program per (query, mesh, contact model): a repeated query traces nothing
-    name = "snap_angles_extrapolated" if args.extrapolate else "snap_angles"
-
-    def run(scene):
-        out, _ = _exported.call(name, functools.partial(_snap_arrays, extrapolate=bool(args.extrapolate)),
+    # one exported program per (query, mesh, contact model): a repeated query traces nothing.
+    # Extrapolated, the two meshes are two programs, run (and compiled) concurrently
+    def one_mesh(scene, continue_after_snap):
+        name = "snap_angles" if continue_after_snap else "snap_angles_no_continuation"
+        out, _ = _exported.call(name, functools.partial(_snap_arrays, continue_after_snap=continue_after_snap),
                                 _array_leaves(scene))
         return {k: np.asarray(v) for k, v in out.items()}
+
+    def run(scene):
+        if not args.extrapolate:
+            return one_mesh(scene, True)
+        from .._misc import concurrently
+
+        fine_scene = jr.refined_scene(scene)
+        fine, coarse = concurrently(lambda: one_mesh(fine_scene, False), lambda: one_mesh(scene, False))
+        return _extrapolated_arrays(coarse, fine)
 
     out = run(scene)
     if contact_mode(args) == "auto":

@@ -153,6 +153,13 @@ def _tri_matvec(lower, diag, upper, x):
     return diag[:, None] * x + lower[:, None] * below + upper[:, None] * above
 
 
+def tridiagonal_matvec(lower, diag, upper, x):
+    r"""$A x$ for the tridiagonal $A$ of [`tridiagonal_solve`][]'s layout (`lower[0]` and
+    `upper[-1]` ignored); `x` of shape (N, k)."""
+    zero = jnp.zeros_like(diag[:1])
+    return _tri_matvec(jnp.concatenate([zero, lower[1:]]), diag, jnp.concatenate([upper[:-1], zero]), x)
+
+
 def tridiagonal_solve(lower, diag, upper, rhs):
     r"""Solve $A x = b$ for tridiagonal $A$, in the layout of
     `lax.linalg.tridiagonal_solve`: `lower[i]` $=A_{i,i-1}$ (`lower[0]` ignored),

@@ -263,3 +263,15 @@ def modes(K: BorderedTridiagonal, eigenvalues, iterations: int = 3):
     i = jnp.argmax(jnp.abs(V), axis=1)
     sgn = jnp.sign(V[jnp.arange(V.shape[0]), i])
     return (V * sgn[:, None]).T
+
+
+def critical_mode(K: BorderedTridiagonal):
+    r"""The eigenvector (theta part, unit norm) of the constrained eigenvalue nearest zero,
+    by shifted inverse iteration at $\sigma\approx0$ ([`modes`][] without the bisection for
+    the eigenvalue). Meant for a state next to a critical point (a fold or a branch point),
+    where that eigenvalue is about zero and isolated: each iteration then reduces the other
+    components by $|\lambda_1-\sigma|/|\lambda_2-\sigma|\ll1$. The same vector as
+    `modes(K, smallest_eigenvalues(K, 1))` there, at the cost of 3 solves instead of 64
+    Sturm counts more."""
+    return modes(K, jnp.zeros(1, K.diag.dtype))[:, 0]
+
