@@ -38,8 +38,13 @@ rotation; the two snap angles alpha_c up (snap up from the down state) and alpha
   separately, the whole driver wall time (Python writing constants and copying restart
   files, parsing fort.7/fort.8); the gfortran build of the equation file is the "compile".
 * jaxrod: `jr.snap_angles_extrapolated(jr.make_scene(60, 0.5, n=100))` (both states by
-  homotopy, both paths, refinement, Richardson from n = 100 and 200) under `jax.jit`: the
-  first call (trace + XLA compile + run) and the median of repeated calls; and plain
+  homotopy, both paths, refinement, Richardson from n = 100 and 200) called as users call it:
+  the two meshes are two programs, run (and compiled) concurrently on the machine's cores
+  (`jaxrod._misc.concurrently`); the first call (trace + XLA compile + run) and the median of
+  repeated calls. At the matched mesh also under `jax.jit` (one program: both meshes one
+  after the other on one core), beside AUTO's two chains of runs (up state -> snap down, down
+  state -> snap up) as they would run side by side on two cores (the critical path of the
+  measured run times, an estimate); and plain
   `jr.snap_angles` at n = 800 (AOT compile, then median), whose mesh error is about
   0.0016 deg. float64.
 * Accuracy: the reference is `jr.snap_angles_extrapolated(jr.make_scene(60, 0.5, n=400))`
@@ -387,6 +392,12 @@ def matched_n(ref, log):
 
 
 def jaxrod_extrapolated_fn():
+    """`snap_angles_extrapolated` as users call it (the meshes concurrently, one program each)."""
+    return jr.snap_angles_extrapolated
+
+
+def jaxrod_one_program_fn():
+    """The same under `jax.jit`: one program, both meshes one after the other on one core."""
     return jax.jit(lambda s: jr.snap_angles_extrapolated(s))
 
 
@@ -485,11 +496,15 @@ def write_md(res, path):
              f"{ra['paths']['down']['alpha_c_deg']:.6f} ({ra['paths']['down']['found']}, "
              f"{ra['paths']['down']['error_deg']:+.1e}) | {a_t['solver_ms']:.0f} | {a_t['with_build_s']:.2f} | | |")
     L.append(f"| AUTO-07p, same, whole Python driver | | | {a_t['wall_ms']:.0f} | {a_t['wall_with_build_s']:.2f} | | |")
+    L.append(f"| AUTO-07p, same, its two chains of runs side by side on 2 cores (estimate: critical path of the run "
+             f"times) | | | {a_t['two_chains_ms']:.0f} | | | |")
     mt = t.get("matched")
     matched_label = (f"jaxrod `snap_angles_extrapolated`, n = {mt['N']} + {mt['N_fine']} (the smallest uniform "
                      f"mesh within {ACCURACY_DEG} deg)" if mt else "")
+    one_label = (f"jaxrod, same, n = {mt['N']} + {mt['N_fine']} under `jax.jit` (one program: one core, the "
+                 "meshes one after the other)" if mt else "")
     for key, label in (("extrapolated", f"jaxrod `snap_angles_extrapolated`, n = {N_JAXROD} + {2 * N_JAXROD}"),
-                       ("matched", matched_label),
+                       ("matched", matched_label), ("matched_one_program", one_label),
                        ("plain", f"jaxrod `snap_angles`, n = {res['n_plain']}")):
         j = t.get(key)
         if j is None:
@@ -498,7 +513,7 @@ def write_md(res, path):
         L.append(f"| {label} | {j['up_deg']:.6f} ({j['up_kind']}, {j['up_error_deg']:+.1e}) | "
                  f"{j['down_deg']:.6f} ({j['down_kind']}, {j['down_error_deg']:+.1e}) | {j['median_ms']:.0f} | "
                  f"{j['first_call_s']:.1f} | {rr['solver_over_run']:.2f} (min/min {rr['solver_over_run_min']:.2f}; "
-                 f"driver {rr['wall_over_run']:.2f}) | "
+                 f"driver {rr['wall_over_run']:.2f}; AUTO's two chains side by side {rr['two_chains_over_run']:.2f}) | "
                  f"{rr['with_build_over_first_call']:.3f} |")
     L += ["",
           "Run times are medians of "
@@ -649,10 +664,14 @@ def main(argv=None):
             t0 = time.perf_counter()
             _block(f_ex(sc_m))
             first_m = time.perf_counter() - t0
+            f_one = jaxrod_one_program_fn()
+            t0 = time.perf_counter()
+            r_one = _block(f_one(sc_m))
+            first_one = time.perf_counter() - t0
 
         # timing, AUTO and jaxrod alternating
         log(f"timing ({reps} repeats, alternating):")
-        ta, tw, tcpu, tj, tm = [], [], [], [], []
+        ta, tw, tcpu, tj, tm, tone = [], [], [], [], [], []
         last = None
         for _ in range(reps):
             a = auto_snap_angles(exe, td / "timing", nt)
@@ -667,6 +686,9 @@ def main(argv=None):
                 t0 = time.perf_counter()
                 _block(f_ex(sc_m))
                 tm.append(time.perf_counter() - t0)
+                t0 = time.perf_counter()
+                _block(f_one(sc_m))
+                tone.append(time.perf_counter() - t0)
         last = _errors(last, ref)
         res["auto_at_ntst"] = last
         res["auto_start_check"] = dict(
@@ -679,10 +701,15 @@ def main(argv=None):
             down_fold_height_before=last["paths"]["down"]["fold_height_before"])
         a_med, a_min = _median_ms(ta)
         w_med, w_min = _median_ms(tw)
+        # AUTO's two chains side by side (an estimate from the last repeat's run times)
+        rt = {k: v["wall_ms"] for k, v in last["runs"].items()}
+        two_chains = rt["buckle"] + max(rt["gap+"] + rt["crease_up"] + rt["alpha_down"],
+                                        rt["gap-"] + rt["crease_down"] + rt["alpha_up"])
         auto_t = dict(NTST=nt, solver_ms=a_med, solver_min_ms=a_min, wall_ms=w_med, wall_min_ms=w_min,
                       auto_total_time_ms=1e3 * float(np.nanmedian(tcpu)), build_s=build_s,
                       with_build_s=build_s + a_med / 1e3, wall_with_build_s=build_s + w_med / 1e3,
-                      runs=last["runs"], points=last["points"], solver_all_ms=[1e3 * x for x in ta])
+                      runs=last["runs"], points=last["points"], solver_all_ms=[1e3 * x for x in ta],
+                      two_chains_ms=two_chains, two_chains_over_one=two_chains / sum(rt.values()))
         log(f"  AUTO NTST={nt}: processes {a_med:.0f} ms (min {a_min:.0f}), driver wall {w_med:.0f} ms")
 
     ex = _jaxrod_row(N_JAXROD, r_ex, first_ex, tj, ref)
@@ -692,6 +719,8 @@ def main(argv=None):
     if sc_m is not None:
         mt = timing["matched"] = _jaxrod_row(n_m, r_m, first_m, tm, ref)
         log(f"  jaxrod extrapolated n={n_m}: {mt['median_ms']:.0f} ms (min {mt['min_ms']:.0f})")
+        mo = timing["matched_one_program"] = _jaxrod_row(n_m, r_one, first_one, tone, ref)
+        log(f"  jaxrod extrapolated n={n_m}, one program: {mo['median_ms']:.0f} ms (min {mo['min_ms']:.0f})")
 
     if not args.quick:
         sc8 = scene(N_PLAIN)
@@ -719,11 +748,12 @@ def main(argv=None):
     res["timing"] = timing
     res["auto_settings"] = dict(formulation="folded", **SETTINGS, DS=STAGE_DS, NTST=res["auto_ntst"])
     res["ratios"] = {}
-    for key in ("extrapolated", "matched", "plain"):
+    for key in ("extrapolated", "matched", "matched_one_program", "plain"):
         j = timing.get(key)
         if j is None:
             continue
-        res["ratios"][key] = dict(solver_over_run=auto_t["solver_ms"] / j["median_ms"],
+        res["ratios"][key] = dict(two_chains_over_run=auto_t["two_chains_ms"] / j["median_ms"],
+                                  solver_over_run=auto_t["solver_ms"] / j["median_ms"],
                                   solver_over_run_min=auto_t["solver_min_ms"] / j["min_ms"],
                                   wall_over_run=auto_t["wall_ms"] / j["median_ms"],
                                   with_build_over_first_call=auto_t["with_build_s"] / j["first_call_s"],

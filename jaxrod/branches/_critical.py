@@ -30,16 +30,18 @@ condition number numerically.
 
 $\ell = h\odot v_0$ with $v_0$ the starting mode ($h$: segment lengths).
 
-**Jacobian.** Dense, $(2N+5)^2$ or $(N+3)^2$, solved by one LU per Newton step, but
-assembled from its sparsity ([`_structured_jacobian`][]): the energy couples only
+**Jacobian.** $(2N+5)^2$ or $(N+3)^2$, assembled from its sparsity ([`_structured_jacobian`][]): the energy couples only
 neighbouring angles, so the rows of $F_\theta$ and $(\mathsf Kv)_\theta$ depend on the
 angles $\theta$ and mode angles $v_\theta$ only within $|i-j|\le1$. Three colour probes
 ($j \bmod 3$) per angle block, one forward-mode probe per remaining column ($\mu$,
 $\alpha$, $v_\mu$) and one reverse-mode probe per remaining row (the constraint rows of
 $F$ and $\mathsf Kv$, $\ell^\top v_\theta$) give every entry: 11 forward and 5 reverse
 probes for the fold system instead of $2N+5$ forward ones (9 and 3 for the branch-point
-system, 12 and 6 for the cusp's). With self-contact the angle blocks are dense and
-`jax.jacfwd` builds the Jacobian.
+system, 12 and 6 for the cusp's). Each Newton step solves with it by block elimination
+([`_block_solve`][]): two tridiagonal solves for the angle blocks and a Schur complement of
+the 5 (3, 6) remaining unknowns, $O(N)$ instead of a dense LU's $O(N^3)$ (N = 120: 66 us
+instead of 491 us per solve). With self-contact the angle blocks are dense: `jax.jacfwd`
+builds the Jacobian and one dense LU solves with it.
 
 **Derivatives.** The Newton iterations run on `stop_gradient`-ed data; the result is
 then passed once more through $z^\ast \leftarrow z^\ast - J^{-1}R(z^\ast;p)$ with $J$

@@ -126,7 +126,7 @@ def _refine(scene, parameter, branch, settings, tol, bisections):
     ds_b = branch.ds[i]
 
     # `bisections` halvings, then one more pass that corrects at `hi`, the state just past
-    # the critical point (whose lowest mode tells the kind): one corrector call site. Each
+    # the critical point (whose critical mode tells the kind): one corrector call site. Each
     # correction starts from the last stable state moved along the tangent to `s`, at most
     # the bracket's width away (the prediction from `a` is up to the whole step away), so it
     # takes fewer Newton iterations to the same point

@@ -514,7 +514,7 @@ def _snap_arrays(scene, continue_after_snap=True):
                     f"fold_height_before_{name}": p.fold_height_before,
                     f"fold_height_after_{name}": p.fold_height_after,
                     f"start_{name}": code(p.start_result), f"result_{name}": code(p.result),
-                    f"refine_{name}": code(p.refine_result),
+                    f"refine_{name}": code(jr.RESULTS.successful if p.refine_result is None else p.refine_result),
                     f"alpha_c2_{name}": q.alpha_c2, f"kind2_{name}": q.kind2, f"result2_{name}": code(q.result),
                     f"clearance_{name}": clearance(p, scene), f"clicks_{name}": p.clicks})
     return out

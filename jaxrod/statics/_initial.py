@@ -21,6 +21,13 @@ predecessor turned by `CONTACT_SEED` rad (a mirror-asymmetric perturbation) so t
 minimization leaves it for the stable asymmetric state (in which the right leg lies above
 the left one); where the symmetric state is stable, the seed relaxes away.
 
+Each step of a path starts Newton from the secant prediction (the previous step's change of
+the angles and end force added once more): two Newton iterations per step instead of three
+from the previous state. A step that loses the tracked state from the prediction is solved
+again from the previous state before the path is abandoned, so the prediction never decides
+which paths are valid. Not with self-contact: a predicted state could already pass through
+itself, which the penalty cannot undo.
+
 The flat buckled start is $\theta_i=\pm A\sin(2\pi m_i/L)$ with $A$ chosen so that
 $\sum_i h_i\cos\theta_i=G$ exactly; Newton then relaxes it onto the elastica.
 """
@@ -161,6 +168,9 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2)):
     flat = _deformed(_with_gap(target, zero), zero, zero)
     guess = sgn * buckled_guess(flat, True)
     seed = 0.0 if target.contact is None else CONTACT_SEED
+    # the secant prediction (module docstring); not with self-contact, where a predicted state
+    # could already pass through itself, which no penalty undoes
+    secant = 1.0 if target.contact is None else 0.0
     arrays, static = eqx.partition(target, eqx.is_array)
 
     def scene_at(phase, kind, step):
@@ -170,27 +180,35 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2)):
         return eqx.combine(_tree_where(phase == _FINAL, arrays, deformed), static)
 
     def body(c):
-        phase, k, step, t, m, ok, found, t0, m0, ok0, out = c
+        phase, k, step, t, m, ok, found, t0, m0, ok0, dt, dm, out = c
         sc = scene_at(phase, kinds[jnp.minimum(k, kinds.shape[0] - 1)], step)
-        t_in = jnp.where(phase == _FLAT, guess, jnp.where(phase == _PATH, t + seed, t))
-        m_in = jnp.where(phase == _FLAT, jnp.zeros_like(m), m)
+        # a path step starts from the secant prediction (the last step's change added again)
+        t_in = jnp.where(phase == _FLAT, guess, jnp.where(phase == _PATH, t + secant * dt + seed, t))
+        m_in = jnp.where(phase == _FLAT, jnp.zeros_like(m), jnp.where(phase == _PATH, m + secant * dm, m))
         eq = solve_unflagged(sc, t_in, m_in, solver)
         good = eq.converged & eq.stable & (sgn * _fold_height(eq.theta, eq.force, sc) > 0)
+        no_dt, no_dm = jnp.zeros_like(dt), jnp.zeros_like(dm)
         # flat start: valid -> the first path from it; else nothing to deform: polish
         after_flat = (jnp.where(good, _PATH, _FINAL), k, jnp.zeros_like(step), eq.theta, eq.force, good, found,
-                      eq.theta, eq.force, good)
-        # path step: still tracked -> next step, or the polish after the last one; lost ->
-        # the next path from the flat start, or the polish if none is left
+                      eq.theta, eq.force, good, no_dt, no_dm)
+        # path step: still tracked -> next step, or the polish after the last one; lost from a
+        # secant prediction -> the same step again from the last state; lost from there -> the
+        # next path from the flat start, or the polish if none is left
         tracked = ok & still_tracked(eq, sgn, t, sc)
+        retry = ~tracked & ok & jnp.any(secant * dt != 0)
         last = step + 1 == steps
         more = k + 1 < kinds.shape[0]
-        lost = ~tracked & more
-        after_path = (jnp.where(tracked, jnp.where(last, _FINAL, _PATH), jnp.where(more, _PATH, _FINAL)),
-                      jnp.where(tracked, k, k + 1), jnp.where(tracked, step + 1, 0),
-                      jnp.where(lost, t0, eq.theta), jnp.where(lost, m0, eq.force), jnp.where(lost, ok0, tracked),
-                      tracked & last, t0, m0, ok0)
+        lost = ~tracked & ~retry & more
+        after_path = (jnp.where(tracked, jnp.where(last, _FINAL, _PATH),
+                                jnp.where(retry | more, _PATH, _FINAL)),
+                      jnp.where(tracked | retry, k, k + 1), jnp.where(tracked, step + 1, jnp.where(retry, step, 0)),
+                      jnp.where(lost, t0, jnp.where(retry, t, eq.theta)),
+                      jnp.where(lost, m0, jnp.where(retry, m, eq.force)),
+                      jnp.where(lost, ok0, tracked | retry),
+                      tracked & last, t0, m0, ok0,
+                      jnp.where(tracked, eq.theta - t, no_dt), jnp.where(tracked, eq.force - m, no_dm))
         head = _tree_where(phase == _FLAT, after_flat, after_path)
-        head = _tree_where(phase == _FINAL, (_DONE,) + c[1:10], head)
+        head = _tree_where(phase == _FINAL, (_DONE,) + c[1:12], head)
         out = _tree_where(phase == _FINAL, eqx.filter(eq, eqx.is_array), out)
         new = head + (out,)
         # finished members of a batch (under `vmap`) keep their state
@@ -203,7 +221,8 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2)):
     f0 = jnp.zeros((), bool)
     t_init, m_init = guess, jnp.zeros(2, dtype)
     c = lax.while_loop(lambda c: c[0] != _DONE, body,
-                       (i0 + _FLAT, i0, i0, t_init, m_init, f0, f0, t_init, m_init, f0, out0))
+                       (i0 + _FLAT, i0, i0, t_init, m_init, f0, f0, t_init, m_init, f0, jnp.zeros_like(t_init),
+                        jnp.zeros_like(m_init), out0))
     return eqx.combine(c[-1], eq_static), c[6]
 
 
