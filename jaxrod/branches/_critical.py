@@ -43,10 +43,9 @@ the 5 (3, 6) remaining unknowns, $O(N)$ instead of a dense LU's $O(N^3)$ (N = 12
 instead of 491 us per solve). With self-contact the angle blocks are dense: `jax.jacfwd`
 builds the Jacobian and one dense LU solves with it.
 
-**Derivatives.** The Newton iterations run on `stop_gradient`-ed data; the result is
-then passed once more through $z^\ast \leftarrow z^\ast - J^{-1}R(z^\ast;p)$ with $J$
-frozen. At a root this changes nothing in value, and its derivative is exactly the
-implicit-function derivative $dz^\ast/dp=-J^{-1}\partial_pR$, for every float leaf $p$ of
+**Derivatives.** The Newton iterations run on `stop_gradient`-ed data; the root $z^\ast$
+then carries a custom derivative rule (`_implicit_step`), the implicit-function derivative
+$dz^\ast/dp=-J^{-1}\partial_pR$ with $J$ the Jacobian at $z^\ast$, for every float leaf $p$ of
 the scene ($\Psi_0$, $G$, $s_0$, the fixed clamp's angle for one-sided actuation, ...),
 under `jit`, `vmap`, `grad` and `jvp` (first derivatives; second derivatives through
 this step are not exact).
@@ -229,6 +228,7 @@ def _block_solve(J, r, n, row_starts, col_starts):
     local_cols = np.concatenate([c0 + j, c1 + j])
     dense_rows = np.setdiff1d(np.arange(M), local_rows)
     dense_cols = np.setdiff1d(np.arange(M), local_cols)
+    order = np.argsort(np.concatenate([local_cols, dense_cols]))  # (angle-like, rest) -> z's order
     zero = jnp.zeros((), J.dtype)
 
     def tri(r, c):
@@ -245,17 +245,33 @@ def _block_solve(J, r, n, row_starts, col_starts):
         X0 = batched.tridiagonal_solve(*T0, R[:n])
         return jnp.concatenate([X0, batched.tridiagonal_solve(*T1, R[n:] - batched.tridiagonal_matvec(*B, X0))])
 
+    # (the solves with U, which depend on J alone, stay apart from those with the right-hand
+    # side, so that the solve is a linear map of `r` that JAX can transpose)
     XU = solve_a(U)
-    S = D - W @ XU
+    S_inv = batched.solve(D - W @ XU, jnp.eye(dense_rows.size, dtype=J.dtype))
 
     def once(rhs):
         xr = solve_a(rhs[local_rows][:, None])[:, 0]
-        yd = batched.solve(S, rhs[dense_rows] - W @ xr)
-        yl = xr - XU @ yd
-        return jnp.zeros(M, J.dtype).at[local_cols].set(yl).at[dense_cols].set(yd)
+        yd = S_inv @ (rhs[dense_rows] - W @ xr)
+        return jnp.concatenate([xr - XU @ yd, yd])[order]
 
     x = once(r)
     return x + once(r - J @ x)
+
+
+def _neutral_jacobian(M, N, kind, dtype):
+    """A stand-in Jacobian where the real one is not available (a system that did not run, or
+    failed): nonsingular for `_block_solve` as for a dense LU, so that the derivative rule
+    stays finite. The permutation matrix that maps each angle-like column to the
+    angle-like row of the same index, and the remaining columns to the remaining rows."""
+    n, (r0, r1), (c0, c1) = _layout(N, kind)
+    j = np.arange(n)
+    rows = np.concatenate([r0 + j, r1 + j])
+    cols = np.concatenate([c0 + j, c1 + j])
+    P = np.zeros((M, M))
+    P[rows, cols] = 1.0
+    P[np.setdiff1d(np.arange(M), rows), np.setdiff1d(np.arange(M), cols)] = 1.0
+    return jnp.asarray(P, dtype)
 
 
 def _solver_fn(scene, N, kind):
@@ -267,18 +283,19 @@ def _solver_fn(scene, N, kind):
     return lambda J, r: _block_solve(J, r, n, rows, cols)
 
 
-def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True, jac=None, solve=batched.solve):
+def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True, jac=None, solve=batched.solve, neutral=None):
     """Plain Newton on res(z) = 0 with dense Jacobians (`jac`, default `jax.jacfwd(res)`),
     each step `solve(J, -res(z))` (default: a dense LU).
 
     Returns `(z, k, done, J)`: `J` the Jacobian at the returned `z` (the implicit step's),
     from one last pass of the loop that evaluates it and takes no step, so that one copy of
-    the Jacobian's program serves the iterations and the derivative; the identity where the
-    loop did not run or `z` is not finite. An inactive call (the system `kind` does not
+    the Jacobian's program serves the iterations and the derivative; `neutral` (default the
+    identity; `_neutral_jacobian` for `_block_solve`) where the loop did not run or `z` is
+    not finite. An inactive call (the system `kind` does not
     select) does not run the loop: under `vmap` the loop then runs only as long as the
     members that need it."""
     jac = jax.jacfwd(res) if jac is None else jac
-    eye = jnp.eye(z0.shape[0], dtype=z0.dtype)
+    eye = jnp.eye(z0.shape[0], dtype=z0.dtype) if neutral is None else neutral
 
     def cond(c):
         z, _, _, _, final = c
@@ -299,9 +316,29 @@ def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True, jac=None, sol
     return z, k, done & active, J
 
 
-def _implicit_step(res_p, z, jac_z, solve=batched.solve):
-    """z - J^{-1} R(z; p) with J frozen: value z (at a root), derivative -J^{-1} dR/dp."""
-    return z - solve(lax.stop_gradient(jac_z), res_p(z))
+def _implicit_step(res, z, jac_z, scene, solve=batched.solve):
+    r"""The root `z` of `res(., scene)` with the implicit-function derivative
+    $dz/dp=-J^{-1}\partial_pR$ with respect to the float leaves $p$ of `scene` ($J$ =
+    `jac_z`, frozen). The value is `z` itself: the solve runs only in the derivative rule,
+    not in the forward program."""
+    arrays, static = eqx.partition(scene, eqx.is_inexact_array)
+    z, jac_z = lax.stop_gradient(z), lax.stop_gradient(jac_z)
+    # the residual's closed-over traced values (the normalization, a traced part of the scene)
+    # become explicit arguments: a derivative rule may not close over tracers
+    res_c, consts = jax.closure_convert(lambda z, a: res(z, eqx.combine(a, static)), z, arrays)
+
+    @jax.custom_jvp
+    def root(z, J, arrays, consts):
+        return z
+
+    @root.defjvp
+    def root_jvp(primals, tangents):
+        z, J, arrays, consts = primals
+        dp = tangents[2]
+        _, dR = jax.jvp(lambda a: res_c(z, a, *consts), (arrays,), (dp,))
+        return z, -solve(J, dR)
+
+    return root(z, jac_z, arrays, lax.stop_gradient(consts))
 
 
 def extended_jacobian(scene, cp: CriticalPoint, parameter: AbstractParameter = SymmetricAlpha()):
@@ -376,23 +413,20 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
         system = "fold" if which == KIND_FOLD else "sym"
         jac = _jacobian_fn(lambda z: res(z, scene_sg), scene_sg, N, system)
         solve = _solver_fn(scene_sg, N, system)
-        z, k, done, J = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, ia, active, jac, solve)
+        neutral = _neutral_jacobian(z0.shape[0], N, system, dtype)
+        z, k, done, J = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, ia, active, jac, solve, neutral)
         finite = jnp.all(jnp.isfinite(z))
         # The system not selected by `kind` (and a failed one) is singular or non-finite: its
-        # derivative step uses the start point and the identity, so that no NaN reaches the
+        # derivative rule uses the start point and a neutral Jacobian, so that no NaN reaches the
         # gradient of the selected one (a zero cotangent times inf is NaN).
         z_use = jnp.where(active & finite, z, z0)
-        eye = jnp.eye(z0.shape[0], dtype=dtype)
-        J = jnp.where(active & finite & jnp.all(jnp.isfinite(J)), J, eye)
+        J = jnp.where(active & finite & jnp.all(jnp.isfinite(J)), J, neutral)
         r = jnp.max(jnp.abs(res(z, scene_sg)))
         # A branch point exists only in a mirror-symmetric scene; its derivative is that of
         # the symmetric family, taken through the scene's mirror-symmetric part
         sc_d = scene if which == KIND_FOLD else mirror_symmetric_part(scene)
-        # the unselected system skips its solve (under `vmap` the `cond` runs both branches,
-        # and the identity above keeps that branch finite)
-        z_imp = lax.cond(active & finite, lambda zu: _implicit_step(lambda z: res(z, sc_d), zu, J, solve),
-                         lambda zu: zu, sg(z_use))
-        z = jnp.where(active & finite, z_imp, z)
+        # the neutral Jacobian above keeps the derivative of the unselected system finite
+        z = jnp.where(active & finite, _implicit_step(res, sg(z_use), J, sc_d, solve), z)
         t, m, a, vt, vm = unpack(z, N)
         result = RESULTS.where(done & finite, RESULTS.successful,
                                RESULTS.where(finite, RESULTS.max_steps_reached, RESULTS.nonfinite))
@@ -495,12 +529,14 @@ def cusp_point(scene, theta, force, alpha, mode, *, parameter: AbstractParameter
 
     jac = _jacobian_fn(lambda z: res(z, scene_sg), scene_sg, N, "cusp")
     solve = _solver_fn(scene_sg, N, "cusp")
-    z, k, done, J = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, 2 * N + 5, jac=jac, solve=solve)
+    neutral = _neutral_jacobian(z0.shape[0], N, "cusp", dtype)
+    z, k, done, J = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, 2 * N + 5, jac=jac, solve=solve,
+                            neutral=neutral)
     finite = jnp.all(jnp.isfinite(z))
     z_use = jnp.where(finite, z, z0)
-    J = jnp.where(finite & jnp.all(jnp.isfinite(J)), J, jnp.eye(J.shape[0], dtype=dtype))
+    J = jnp.where(finite & jnp.all(jnp.isfinite(J)), J, neutral)
     r = jnp.max(jnp.abs(res(z, scene_sg)))
-    z = jnp.where(finite, _implicit_step(lambda z: res(z, scene), sg(z_use), J, solve), z)
+    z = jnp.where(finite, _implicit_step(res, sg(z_use), J, scene, solve), z)
     t, m, a, vt, vm = _fold_unpack(z[:-1], N)
     result = RESULTS.where(done & finite, RESULTS.successful,
                            RESULTS.where(finite, RESULTS.max_steps_reached, RESULTS.nonfinite))
