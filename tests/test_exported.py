@@ -75,7 +75,7 @@ def test_no_cache_calls_directly(monkeypatch):
     assert how == "direct" and float(out["x"]) == pytest.approx(float(query(scene())["x"]))
 
 
-@pytest.mark.slow  # 62 s on 2 cores (two cold CLI processes); CI checks the export and the load in process
+@pytest.mark.slow  # 42 s on 2 cores (four CLI processes, two of them cold); CI checks the export and the load in process
 def test_cli_query_answered_from_the_exported_program(tmp_path):
     """Two `jaxrod snap-angles` processes on one fresh cache: the first exports the query's
     program, the second loads it; both print the library's numbers."""

@@ -89,7 +89,6 @@ def test_cli_defaults_are_extrapolated_at_n_100():
     assert args.extrapolate is True and args.n == 100
 
 
-@pytest.mark.slow  # 57 s on 2 cores (the CLI's own extrapolated program at two meshes)
 def test_cli_default_is_extrapolated(capsys):
     """`jaxrod snap-angles` extrapolates by default, from N and 2N (N = 100 unless --n):
     checked at N = 24 (the default mesh runs the same programs at another size)."""
