@@ -38,6 +38,7 @@ def _top_level() -> bool:
 
 _POOL = None
 _MISMATCH = object()
+_WORKER_PREFIX = "jaxrod-worker"
 
 
 def _trace_context():
@@ -65,19 +66,23 @@ def concurrently(*calls):
     and runs two independent computations inside one program one after the other too, so
     two independent programs (the coarse and the fine mesh of
     [`jaxrod.snap_angles_extrapolated`][]) take the time of the slower one instead of the sum
-    this way, and their first calls compile concurrently (XLA compiles without Python's
-    lock; the tracing before it takes turns). A worker whose thread-local JAX configuration
-    differs from the caller's (a `with jax.enable_x64(...)` block is thread-local) hands its
-    call back to the calling thread; under a transformation, or with one core, the calls run
-    one after the other. Exceptions reach the caller as they would from a plain call."""
+    this way. (Their first calls also compile side by side, which on a 2-core machine gains
+    little: XLA's compiler keeps both cores busy already.) A worker whose thread-local JAX
+    configuration differs from the caller's (a `with jax.enable_x64(...)` block is
+    thread-local) hands its call back to the calling thread; under a transformation, with one
+    core, or on a worker thread itself (no nested use of the pool), the calls run one after
+    the other. Exceptions reach the caller as they would from a plain call."""
     global _POOL
+    import threading
+
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if len(calls) < 2 or cores < 2 or not _top_level():
+    if (len(calls) < 2 or cores < 2 or not _top_level()
+            or threading.current_thread().name.startswith(_WORKER_PREFIX)):
         return tuple(call() for call in calls)
     if _POOL is None:
         import concurrent.futures
 
-        _POOL = concurrent.futures.ThreadPoolExecutor(max_workers=3, thread_name_prefix="jaxrod")
+        _POOL = concurrent.futures.ThreadPoolExecutor(max_workers=3, thread_name_prefix=_WORKER_PREFIX)
     context = _trace_context()
     futures = [_POOL.submit(_in_worker, call, context) for call in calls[1:]]
     first = calls[0]()

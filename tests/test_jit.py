@@ -139,6 +139,10 @@ def test_concurrently_runs_calls_in_threads_and_keeps_their_meaning(monkeypatch)
         assert "psi0" in str(e)
     else:
         raise AssertionError("the worker's exception did not reach the caller")
+    # nested: a call on a worker thread runs its own calls there, one after the other
+    inner = _misc.concurrently(lambda: 0, lambda: _misc.concurrently(
+        lambda: threading.current_thread().name, lambda: threading.current_thread().name))[1]
+    assert inner[0] == inner[1] and inner[0].startswith("jaxrod-worker"), inner
     # under jit: one thread, and the values are those of the plain calls
     names.clear()
     out = jax.jit(lambda x: jnp.stack(_misc.concurrently(lambda: call(x), lambda: call(x + 7.0))))(a)

@@ -133,8 +133,7 @@ def snap_angles_extrapolated(scene: Scene, *, continue_after_snap: bool = False,
     their Richardson extrapolation (module docstring). `kwargs` go to `snap_angles`.
     Costs one `snap_angles` at $N$ plus one at $2N$ (two compilations on first use); called
     outside `jit` and other transformations on a machine with two or more cores, the two run
-    (and compile) concurrently (`jaxrod._misc.concurrently`): about the time of the fine mesh
-    alone.
+    concurrently (`jaxrod._misc.concurrently`): about the time of the fine mesh alone.
 
     `continue_after_snap` defaults to False here: the landed branch after each snap (the
     post-snap stage of the hysteresis figures) does not change the critical angles or the
