@@ -36,3 +36,29 @@ def test_no_path_gives_state_not_found():
     sc = jr.make_scene(10.0, 0.6, -80.0, n=30)
     assert not np.any(np.asarray(path_validity(sc, -1.0)))
     assert jr.initial_state(sc, "down").result == jr.RESULTS.state_not_found
+
+
+def test_secant_prediction_and_retry(monkeypatch):
+    """Homotopy steps start from the secant prediction: 3 steps (large extrapolations) reach
+    the same states as 24; where a path is lost, each prediction that loses it is retried from
+    the last state first (the down state at (30 deg, 0.8) does not exist: every path of the
+    three is lost, with retries)."""
+    events = []
+    real = _initial.still_tracked
+
+    def counted(eq, sgn, t, sc):
+        ok = real(eq, sgn, t, sc)
+        jax.debug.callback(lambda x: events.append(bool(x)), ok)
+        return ok
+
+    monkeypatch.setattr(_initial, "still_tracked", counted)
+    for psi0, gap, state in ((60.0, 0.5, "up"), (60.0, 0.5, "down"), (20.0, 0.3, "down")):
+        scene = jr.make_scene(psi0, gap, n=24)
+        few, many = (jr.initial_state(scene, state, steps=k) for k in (3, 24))
+        assert few.result == many.result == jr.RESULTS.successful
+        np.testing.assert_allclose(few.theta, many.theta, rtol=0, atol=1e-9)
+    events.clear()
+    lost = jr.initial_state(jr.make_scene(30.0, 0.8, n=24), "down", steps=6)
+    assert lost.result == jr.RESULTS.state_not_found
+    # three paths lost; a path lost after its first step is lost twice (prediction, then retry)
+    assert events.count(False) > 3, events

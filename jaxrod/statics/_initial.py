@@ -24,9 +24,10 @@ the left one); where the symmetric state is stable, the seed relaxes away.
 Each step of a path starts Newton from the secant prediction (the previous step's change of
 the angles and end force added once more): two Newton iterations per step instead of three
 from the previous state. A step that loses the tracked state from the prediction is solved
-again from the previous state before the path is abandoned, so the prediction never decides
-which paths are valid. Not with self-contact: a predicted state could already pass through
-itself, which the penalty cannot undo.
+again from the previous state before the path is abandoned, so a poor prediction costs a
+second solve, not the path; every accepted step passes the same tests as before. Not with
+self-contact: a predicted state could already pass through itself, which the penalty cannot
+undo.
 
 The flat buckled start is $\theta_i=\pm A\sin(2\pi m_i/L)$ with $A$ chosen so that
 $\sum_i h_i\cos\theta_i=G$ exactly; Newton then relaxes it onto the elastica.
