@@ -148,6 +148,15 @@ def _sym_residual(y, scene, parameter, ell):
 
 # ----- Newton with an implicit-derivative final step ------------------------------------
 
+def _block_indices(M, n, row_starts, col_starts):
+    """The rows and columns of the angle-like blocks (`n` from each start) of an extended
+    system with `M` unknowns, and the remaining rows and columns, each in increasing order."""
+    j = np.arange(n)
+    local_rows = np.concatenate([r + j for r in row_starts])
+    local_cols = np.concatenate([c + j for c in col_starts])
+    return local_rows, local_cols, np.setdiff1d(np.arange(M), local_rows), np.setdiff1d(np.arange(M), local_cols)
+
+
 def _structured_jacobian(res, z, n, row_starts, col_starts):
     r"""The Jacobian of `res` at `z` (square), assembled from its sparsity (module docstring).
 
@@ -160,10 +169,7 @@ def _structured_jacobian(res, z, n, row_starts, col_starts):
     M = z.shape[0]
     dtype = z.dtype
     j = np.arange(n)
-    local_cols = np.concatenate([c + j for c in col_starts])
-    local_rows = np.concatenate([r + j for r in row_starts])
-    dense_cols = np.setdiff1d(np.arange(M), local_cols)
-    dense_rows = np.setdiff1d(np.arange(M), local_rows)
+    _, _, dense_rows, dense_cols = _block_indices(M, n, row_starts, col_starts)
     seeds = np.zeros((3 * len(col_starts) + dense_cols.size, M))
     for b, c in enumerate(col_starts):
         for colour in range(3):
@@ -212,11 +218,11 @@ def _block_solve(J, r, n, row_starts, col_starts):
     r"""$J^{-1} r$ for an extended-system Jacobian of the layout of `_structured_jacobian`,
     in $O(n)$ instead of a dense LU's $O(n^3)$.
 
-    Ordered as (angle-like rows and columns, the rest), $J=egin{pmatrix}A&U\W&D\end{pmatrix}$
-    with $A=egin{pmatrix}T_0&0\B&T_1\end{pmatrix}$: $T_0=\partial F_	heta/\partial	heta$,
-    $B=\partial(\mathsf Kv)_	heta/\partial	heta$, $T_1=\partial(\mathsf Kv)_	heta/\partial v_	heta$
+    Ordered as (angle-like rows and columns, the rest), $J=\begin{pmatrix}A&U\\W&D\end{pmatrix}$
+    with $A=\begin{pmatrix}T_0&0\\B&T_1\end{pmatrix}$: $T_0=\partial F_\theta/\partial\theta$,
+    $B=\partial(\mathsf Kv)_\theta/\partial\theta$, $T_1=\partial(\mathsf Kv)_\theta/\partial v_\theta$
     tridiagonal, and $F$ independent of $v$ (the zero block). $A^{-1}$ is two tridiagonal
-    solves (LAPACK `gtsv`), the few remaining unknowns ($\mu$, $lpha$, $v_\mu$; the gap of a
+    solves (LAPACK `gtsv`), the few remaining unknowns ($\mu$, $\alpha$, $v_\mu$; the gap of a
     cusp) come from the small Schur complement $S=D-WA^{-1}U$, and one step of iterative
     refinement with $J$ itself keeps the result at the accuracy of a dense LU where $T_0$ or
     $T_1$ is ill-conditioned (the same block elimination as the continuation's corrector).
@@ -224,10 +230,7 @@ def _block_solve(J, r, n, row_starts, col_starts):
     M = J.shape[0]
     j = np.arange(n)
     (r0, r1), (c0, c1) = row_starts, col_starts
-    local_rows = np.concatenate([r0 + j, r1 + j])
-    local_cols = np.concatenate([c0 + j, c1 + j])
-    dense_rows = np.setdiff1d(np.arange(M), local_rows)
-    dense_cols = np.setdiff1d(np.arange(M), local_cols)
+    local_rows, local_cols, dense_rows, dense_cols = _block_indices(M, n, row_starts, col_starts)
     order = np.argsort(np.concatenate([local_cols, dense_cols]))  # (angle-like, rest) -> z's order
     zero = jnp.zeros((), J.dtype)
 
@@ -264,13 +267,10 @@ def _neutral_jacobian(M, N, kind, dtype):
     failed): nonsingular for `_block_solve` as for a dense LU, so that the derivative rule
     stays finite. The permutation matrix that maps each angle-like column to the
     angle-like row of the same index, and the remaining columns to the remaining rows."""
-    n, (r0, r1), (c0, c1) = _layout(N, kind)
-    j = np.arange(n)
-    rows = np.concatenate([r0 + j, r1 + j])
-    cols = np.concatenate([c0 + j, c1 + j])
+    local_rows, local_cols, dense_rows, dense_cols = _block_indices(M, *_layout(N, kind))
     P = np.zeros((M, M))
-    P[rows, cols] = 1.0
-    P[np.setdiff1d(np.arange(M), rows), np.setdiff1d(np.arange(M), cols)] = 1.0
+    P[local_rows, local_cols] = 1.0
+    P[dense_rows, dense_cols] = 1.0
     return jnp.asarray(P, dtype)
 
 
@@ -295,7 +295,7 @@ def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True, jac=None, sol
     select) does not run the loop: under `vmap` the loop then runs only as long as the
     members that need it."""
     jac = jax.jacfwd(res) if jac is None else jac
-    eye = jnp.eye(z0.shape[0], dtype=z0.dtype) if neutral is None else neutral
+    neutral = jnp.eye(z0.shape[0], dtype=z0.dtype) if neutral is None else neutral
 
     def cond(c):
         z, _, _, _, final = c
@@ -310,9 +310,9 @@ def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True, jac=None, sol
         return z + dz, k + jnp.where(last, 0, 1), done | (~last & converged), J, last
 
     active = jnp.asarray(active, bool)
-    z, k, done, J, final = lax.while_loop(cond, body, (z0, jnp.zeros((), jnp.int32), jnp.zeros((), bool), eye,
+    z, k, done, J, final = lax.while_loop(cond, body, (z0, jnp.zeros((), jnp.int32), jnp.zeros((), bool), neutral,
                                                        ~active))
-    J = jnp.where(final & jnp.all(jnp.isfinite(z)), J, eye)
+    J = jnp.where(final & jnp.all(jnp.isfinite(z)), J, neutral)
     return z, k, done & active, J
 
 
