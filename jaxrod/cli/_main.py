@@ -516,7 +516,6 @@ def _snap_arrays(scene, continue_after_snap=True):
                     f"fold_height_before_{name}": p.fold_height_before,
                     f"fold_height_after_{name}": p.fold_height_after,
                     f"start_{name}": code(p.start_result), f"result_{name}": code(p.result),
-                    f"refine_{name}": code(jr.RESULTS.successful if p.refine_result is None else p.refine_result),
                     f"alpha_c2_{name}": q.alpha_c2, f"kind2_{name}": q.kind2, f"result2_{name}": code(q.result),
                     f"clearance_{name}": clearance(p, scene), f"clicks_{name}": p.clicks})
     return out
@@ -551,11 +550,12 @@ def _extrapolated_arrays(coarse, fine, factor=2):
     from ..results import result_from_name, result_name
 
     def path(d, name):
-        codes = {k: result_from_name(result_name(d[f"{k}_{name}"])) for k in ("result", "start", "refine")}
+        codes = {k: result_from_name(result_name(d[f"{k}_{name}"])) for k in ("result", "start")}
+        # the refinement's own code is not printed (a failed refinement is in `result` already)
         return SimpleNamespace(snaps=d[f"snaps_{name}"], kind=d[f"kind_{name}"], clicks=d[f"clicks_{name}"],
                                alpha_c=d[f"alpha_c_{name}"], fold_height_before=d[f"fold_height_before_{name}"],
                                fold_height_after=d[f"fold_height_after_{name}"], result=codes["result"],
-                               start_result=codes["start"], refine_result=codes["refine"])
+                               start_result=codes["start"], refine_result=None)
 
     out = {}
     for name in ("up", "down"):
