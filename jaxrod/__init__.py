@@ -1,7 +1,9 @@
 """jaxrod: differentiable statics and dynamics of creased, snapping elastic strips."""
 
+import importlib
 import importlib.metadata
 import os
+from typing import TYPE_CHECKING
 
 
 # jaxlib's CPU LAPACK kernels (the dense solves of the critical-point refinement, eigvalsh)
@@ -97,31 +99,62 @@ from .branches import SymmetricAlpha as SymmetricAlpha
 from .branches import termination_gap as termination_gap
 from .branches import TerminationGap as TerminationGap
 
-# dynamics: equations of motion, integrators, scenes, snap speed
-from .dynamics import ACTUATOR_DAMPING as ACTUATOR_DAMPING
-from .dynamics import ACTUATOR_VISCOSITY as ACTUATOR_VISCOSITY
-from .dynamics import Actuation as Actuation
-from .dynamics import actuate as actuate
-from .dynamics import Ball as Ball
-from .dynamics import Bodies as Bodies
-from .dynamics import damping_from_ringdown as damping_from_ringdown
-from .dynamics import Floor as Floor
-from .dynamics import hold_and_move as hold_and_move
-from .dynamics import Program as Program
-from .dynamics import Table as Table
-from .dynamics import brink as brink
-from .dynamics import Dissipation as Dissipation
-from .dynamics import Protocol as Protocol
-from .dynamics import ramp as ramp
-from .dynamics import simulate as simulate
-from .dynamics import snap_dynamics as snap_dynamics
-from .dynamics import fit_speed_plane as fit_speed_plane
-from .dynamics import snap_speed as snap_speed
-from .dynamics import snap_speed_run as snap_speed_run
-from .dynamics import SpeedRun as SpeedRun
-from .dynamics import speed_plane as speed_plane
-from .dynamics import Start as Start
-from .dynamics import Trajectory as Trajectory
+# dynamics: equations of motion, integrators, scenes, snap speed. Imported on first use
+# (`__getattr__` below): diffrax, which only the dynamics need, takes a quarter of a second
+# to import, and the statics, branches and CLI queries such as `jaxrod snap-angles` do
+# without it.
+_DYNAMICS = (
+    "ACTUATOR_DAMPING",
+    "ACTUATOR_VISCOSITY",
+    "Actuation",
+    "actuate",
+    "Ball",
+    "Bodies",
+    "damping_from_ringdown",
+    "Floor",
+    "hold_and_move",
+    "Program",
+    "Table",
+    "brink",
+    "Dissipation",
+    "Protocol",
+    "ramp",
+    "simulate",
+    "snap_dynamics",
+    "fit_speed_plane",
+    "snap_speed",
+    "snap_speed_run",
+    "SpeedRun",
+    "speed_plane",
+    "Start",
+    "Trajectory",
+)
+
+if TYPE_CHECKING:
+    from .dynamics import ACTUATOR_DAMPING as ACTUATOR_DAMPING
+    from .dynamics import ACTUATOR_VISCOSITY as ACTUATOR_VISCOSITY
+    from .dynamics import Actuation as Actuation
+    from .dynamics import actuate as actuate
+    from .dynamics import Ball as Ball
+    from .dynamics import Bodies as Bodies
+    from .dynamics import damping_from_ringdown as damping_from_ringdown
+    from .dynamics import Floor as Floor
+    from .dynamics import hold_and_move as hold_and_move
+    from .dynamics import Program as Program
+    from .dynamics import Table as Table
+    from .dynamics import brink as brink
+    from .dynamics import Dissipation as Dissipation
+    from .dynamics import Protocol as Protocol
+    from .dynamics import ramp as ramp
+    from .dynamics import simulate as simulate
+    from .dynamics import snap_dynamics as snap_dynamics
+    from .dynamics import fit_speed_plane as fit_speed_plane
+    from .dynamics import snap_speed as snap_speed
+    from .dynamics import snap_speed_run as snap_speed_run
+    from .dynamics import SpeedRun as SpeedRun
+    from .dynamics import speed_plane as speed_plane
+    from .dynamics import Start as Start
+    from .dynamics import Trajectory as Trajectory
 
 # sweeps: batches across devices, processes and hosts
 from .sweeps import grid as grid
@@ -139,3 +172,16 @@ try:
     __version__ = importlib.metadata.version("jaxrod")
 except importlib.metadata.PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0"
+
+
+def __getattr__(name):
+    """The dynamics' public names (`_DYNAMICS`), imported from `jaxrod.dynamics` on first use."""
+    if name in _DYNAMICS:
+        value = getattr(importlib.import_module(".dynamics", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_DYNAMICS))

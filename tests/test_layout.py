@@ -123,6 +123,34 @@ def test_top_level_names_unchanged():
         assert hasattr(jr, n), n
 
 
+def test_dynamics_imported_on_first_use():
+    """`import jaxrod` leaves the dynamics (and diffrax) unimported; each dynamics name of the
+    top level resolves to `jaxrod.dynamics`' own object on first use and is listed by `dir`;
+    an unknown name is an AttributeError."""
+    import subprocess
+
+    code = (
+        "import sys, jaxrod as jr\n"
+        "assert 'jaxrod.dynamics' not in sys.modules and 'diffrax' not in sys.modules\n"
+        "import jaxrod.cli._main as m; m._build_parser()\n"
+        "assert 'diffrax' not in sys.modules, 'the CLI parser imports the dynamics'\n"
+        "import jaxrod.dynamics as d\n"
+        "for n in jr._DYNAMICS: assert getattr(jr, n) is getattr(d, n) and n in dir(jr), n\n"
+        "try:\n    jr.no_such_name\nexcept AttributeError as e:\n    assert 'no_such_name' in str(e)\n"
+        "else:\n    raise AssertionError('no AttributeError')\n"
+        "print('ok')\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
+    # every public name of the dynamics' surface that the top level re-exports is in `_DYNAMICS`
+    import jaxrod as jr
+    import jaxrod.dynamics as d
+
+    tree = ast.parse((ROOT / "jaxrod" / "__init__.py").read_text())
+    lazy = {a.asname or a.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
+            and node.module == "dynamics" for a in node.names}
+    assert lazy == set(jr._DYNAMICS) and all(hasattr(d, n) for n in lazy)
+
+
 def test_readme_lists_every_result_code():
     """The README's result-code table has a row for every member of `jaxrod.RESULTS`."""
     import jaxrod as jr

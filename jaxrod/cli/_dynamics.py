@@ -26,7 +26,6 @@ import json
 import math
 import os
 
-from ..dynamics import NUDGE
 from ..results import RESULTS
 from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _contact_record, _result_name,
                     add_contact_args, add_distributed_args, add_scene_args, clearance_separation, contact_mode,
@@ -38,8 +37,9 @@ PAPER_FIT = (42.59, 30.38, 5.00)
 def _add_run_args(p):
     g = p.add_argument_group("dynamics")
     g.add_argument("--direction", choices=("up", "down"), default="up", help="snap up or down (default up)")
-    g.add_argument("--nudge", type=float, default=NUDGE,
-                   help=f"brink: nudge along the unstable mode, rad RMS (default {NUDGE})")
+    g.add_argument("--nudge", type=float, default=None,
+                   help="brink: nudge along the unstable mode, rad RMS (default: the library's, "
+                        "jaxrod.dynamics.NUDGE)")
     g.add_argument("--rate", type=float, default=0.5, help="ramp/asymmetric: clamp rate, rad per T (default 0.5)")
     g.add_argument("--solver", default="rattle",
                    help="rattle (default: fixed step, symplectic), tsit5, dopri5, dopri8, kvaerno3, kvaerno5")
@@ -89,8 +89,10 @@ def register(sub):
 
 
 def _check_run_args(args):
-    from ..dynamics import SOLVERS
+    from ..dynamics import NUDGE, SOLVERS
 
+    if args.nudge is None:  # the parser leaves it out: the dynamics are imported only where needed
+        args.nudge = NUDGE
     if args.solver not in SOLVERS:
         raise InputError(f"solver must be one of {sorted(SOLVERS)}, got {args.solver!r}")
     for name in ("nudge", "rate", "rtol", "t1"):
