@@ -41,8 +41,10 @@ rotation; the two snap angles alpha_c up (snap up from the down state) and alpha
   homotopy, both paths, refinement, Richardson from n = 100 and 200) called as users call it:
   the two meshes are two programs, run (and compiled) concurrently on the machine's cores
   (`jaxrod._misc.concurrently`); the first call (trace + XLA compile + run) and the median of
-  repeated calls. At the matched mesh also under `jax.jit` (one program: both meshes one
-  after the other on one core), beside AUTO's two chains of runs (up state -> snap down, down
+  repeated calls. At matched accuracy: the smallest uniform mesh and the smallest graded mesh
+  (`refine=2`: segments twice as short at the crease, `GRADED_REFINE`) whose extrapolation is
+  within 0.002 deg, each called as users call it and under `jax.jit` (one program: both
+  meshes one after the other on one core), beside AUTO's two chains of runs (up state -> snap down, down
   state -> snap up) as they would run side by side on two cores (the critical path of the
   measured run times, an estimate); and plain
   `jr.snap_angles` at n = 800 (AOT compile, then median), whose mesh error is about
@@ -50,7 +52,8 @@ rotation; the two snap angles alpha_c up (snap up from the down state) and alpha
 * Accuracy: the reference is `jr.snap_angles_extrapolated(jr.make_scene(60, 0.5, n=400))`
   (Richardson from n = 400 and 800). AUTO's alpha_c is tabulated against NTST; the NTST
   timed is the smallest one from which on every NTST of the table has both angles within
-  0.002 deg of the reference. At high NTST, AUTO's alpha = 0 states (fold height, end
+  0.002 deg of the reference; jaxrod's matched meshes are chosen by the same rule from a list
+  of candidates (`MATCHED_CANDIDATES`, `GRADED_CANDIDATES`). At high NTST, AUTO's alpha = 0 states (fold height, end
   force), the fold heights at the snaps and the angles (to AUTO's special-point tolerance
   EPSS) agree with the reference: both codes solve the same continuum problem.
 
@@ -348,8 +351,8 @@ def converged_ntst(rows):
 # ----------------------------------------------------------------------------- jaxrod
 
 
-def scene(n):
-    return jr.make_scene(PSI0_DEG, GAP, 0.0, s0=S0, n=n)
+def scene(n, refine=1.0):
+    return jr.make_scene(PSI0_DEG, GAP, 0.0, s0=S0, n=n, refine=refine)
 
 
 def _path_ref(p, kind):
@@ -374,21 +377,42 @@ def extrapolated(n):
 
 
 MATCHED_CANDIDATES = (40, 50, 60, 70, 80)
-"""Coarse meshes tried, in order, for jaxrod's matched-accuracy row (extrapolated from n and 2n)."""
+"""Coarse uniform meshes tried, in order, for jaxrod's matched-accuracy rows (extrapolated from
+n and 2n)."""
+
+GRADED_REFINE = 2.0
+"""The graded meshes' `refine` (segments twice as short at the crease as far from it, the
+default width 0.1 L): `jr.make_scene(..., refine=2.0)`. The crease is 0.02 L wide, so a
+uniform mesh spends most of its nodes where the strip is smooth."""
+
+GRADED_CANDIDATES = (24, 30, 36, 40, 50, 60)
+"""Coarse graded meshes tried, in order, for the graded matched-accuracy rows."""
 
 
-def matched_n(ref, log):
-    """The smallest n of `MATCHED_CANDIDATES` whose extrapolation (n + 2n) is within
-    `ACCURACY_DEG` of the reference with the reference's kinds on both paths, chosen the way
-    AUTO's NTST is: `(n, result)`, or `(None, None)`."""
-    for n in MATCHED_CANDIDATES:
-        r = _block(jr.snap_angles_extrapolated(scene(n)))
+def matched_n(ref, log, candidates=MATCHED_CANDIDATES, refine=1.0):
+    """The smallest n of `candidates` (at `refine`) whose extrapolation (n + 2n) is within
+    `ACCURACY_DEG` of the reference with the reference's kinds on both paths, and on every
+    larger candidate too, chosen the way AUTO's NTST is: `(n, result)`, or `(None, None)`."""
+    found = []
+    for n in candidates:
+        # the scan compiles in the fast mode (same numbers to round-off); the timed rows recompile
+        before = os.environ.get("JAXROD_COMPILE")
+        os.environ["JAXROD_COMPILE"] = "fast"
+        try:
+            r = _block(jr.snap_angles_extrapolated(scene(n, refine)))
+        finally:
+            os.environ.pop("JAXROD_COMPILE") if before is None else os.environ.update(JAXROD_COMPILE=before)
         errs = [abs(math.degrees(float(getattr(r, p).alpha_c)) - ref[p]["alpha_c_deg"]) for p in ("up", "down")]
         kinds = all(jr.KIND_NAMES[int(getattr(r, p).kind)] == ref[p]["kind"] for p in ("up", "down"))
-        log(f"  matched accuracy: n = {n} + {2 * n}: errors {errs[0]:.1e} / {errs[1]:.1e} deg, kinds ok {kinds}")
-        if kinds and max(errs) <= ACCURACY_DEG:
-            return n, r
-    return None, None
+        log(f"  matched accuracy, refine = {refine:g}: n = {n} + {2 * n}: errors {errs[0]:.1e} / {errs[1]:.1e} deg, "
+            f"kinds ok {kinds}")
+        found.append((n, r, kinds and max(errs) <= ACCURACY_DEG))
+    best = (None, None)
+    for n, r, ok in reversed(found):
+        if not ok:
+            break
+        best = (n, r)
+    return best
 
 
 def jaxrod_extrapolated_fn():
@@ -498,14 +522,16 @@ def write_md(res, path):
     L.append(f"| AUTO-07p, same, whole Python driver | | | {a_t['wall_ms']:.0f} | {a_t['wall_with_build_s']:.2f} | | |")
     L.append(f"| AUTO-07p, same, its two chains of runs side by side on 2 cores (estimate: critical path of the run "
              f"times) | | | {a_t['two_chains_ms']:.0f} | | | |")
-    mt = t.get("matched")
-    matched_label = (f"jaxrod `snap_angles_extrapolated`, n = {mt['N']} + {mt['N_fine']} (the smallest uniform "
-                     f"mesh within {ACCURACY_DEG} deg)" if mt else "")
-    one_label = (f"jaxrod, same, n = {mt['N']} + {mt['N_fine']} under `jax.jit` (one program: one core, the "
-                 "meshes one after the other)" if mt else "")
-    for key, label in (("extrapolated", f"jaxrod `snap_angles_extrapolated`, n = {N_JAXROD} + {2 * N_JAXROD}"),
-                       ("matched", matched_label), ("matched_one_program", one_label),
-                       ("plain", f"jaxrod `snap_angles`, n = {res['n_plain']}")):
+    labels = [("extrapolated", f"jaxrod `snap_angles_extrapolated`, n = {N_JAXROD} + {2 * N_JAXROD}")]
+    for key, what in (("matched", "uniform mesh"), ("graded", f"graded mesh, `refine={GRADED_REFINE:g}`")):
+        mt = t.get(key)
+        if mt:
+            labels += [(key, f"jaxrod `snap_angles_extrapolated`, n = {mt['N']} + {mt['N_fine']} (the smallest {what} "
+                             f"within {ACCURACY_DEG} deg)"),
+                       (f"{key}_one_program", f"jaxrod, same, n = {mt['N']} + {mt['N_fine']} under `jax.jit` (one "
+                                              "program: one core, the meshes one after the other)")]
+    labels.append(("plain", f"jaxrod `snap_angles`, n = {res['n_plain']}"))
+    for key, label in labels:
         j = t.get(key)
         if j is None:
             continue
@@ -657,24 +683,29 @@ def main(argv=None):
             variants.append(row)
         res["auto_variants"] = variants
 
-        # jaxrod at matched accuracy: the smallest uniform mesh within the accuracy
-        n_m, r_m = matched_n(ref, log)
-        sc_m = scene(n_m) if n_m is not None else None
-        if sc_m is not None:
-            # first calls from empty caches (`matched_n` compiled this mesh's programs already)
+        # jaxrod at matched accuracy: the smallest uniform and graded meshes within the accuracy
+        matched = {}
+        for key, cands, refine in (("matched", MATCHED_CANDIDATES, 1.0), ("graded", GRADED_CANDIDATES, GRADED_REFINE)):
+            n_m, _ = matched_n(ref, log, cands, refine)
+            if n_m is None:
+                continue
+            sc_m = scene(n_m, refine)
+            # first calls from empty caches, in the default (optimized) compile mode
             jax.clear_caches()
             t0 = time.perf_counter()
-            _block(f_ex(sc_m))
+            r_m = _block(f_ex(sc_m))
             first_m = time.perf_counter() - t0
             f_one = jaxrod_one_program_fn()
             jax.clear_caches()
             t0 = time.perf_counter()
             r_one = _block(f_one(sc_m))
             first_one = time.perf_counter() - t0
+            matched[key] = dict(n=n_m, refine=refine, scene=sc_m, r=r_m, first=first_m, one=f_one, r_one=r_one,
+                                first_one=first_one, times=[], times_one=[])
 
         # timing, AUTO and jaxrod alternating
         log(f"timing ({reps} repeats, alternating):")
-        ta, tw, tcpu, tj, tm, tone = [], [], [], [], [], []
+        ta, tw, tcpu, tj = [], [], [], []
         last = None
         for _ in range(reps):
             a = auto_snap_angles(exe, td / "timing", nt)
@@ -685,13 +716,13 @@ def main(argv=None):
             t0 = time.perf_counter()
             _block(f_ex(sc))
             tj.append(time.perf_counter() - t0)
-            if sc_m is not None:
+            for m in matched.values():
                 t0 = time.perf_counter()
-                _block(f_ex(sc_m))
-                tm.append(time.perf_counter() - t0)
+                _block(f_ex(m["scene"]))
+                m["times"].append(time.perf_counter() - t0)
                 t0 = time.perf_counter()
-                _block(f_one(sc_m))
-                tone.append(time.perf_counter() - t0)
+                _block(m["one"](m["scene"]))
+                m["times_one"].append(time.perf_counter() - t0)
         last = _errors(last, ref)
         res["auto_at_ntst"] = last
         res["auto_start_check"] = dict(
@@ -719,11 +750,14 @@ def main(argv=None):
     log(f"  jaxrod extrapolated n={N_JAXROD}: {ex['median_ms']:.0f} ms (min {ex['min_ms']:.0f}); "
         f"first call {first_ex:.1f} s")
     timing = dict(repeats=reps, auto=auto_t, extrapolated=ex)
-    if sc_m is not None:
-        mt = timing["matched"] = _jaxrod_row(n_m, r_m, first_m, tm, ref)
-        log(f"  jaxrod extrapolated n={n_m}: {mt['median_ms']:.0f} ms (min {mt['min_ms']:.0f})")
-        mo = timing["matched_one_program"] = _jaxrod_row(n_m, r_one, first_one, tone, ref)
-        log(f"  jaxrod extrapolated n={n_m}, one program: {mo['median_ms']:.0f} ms (min {mo['min_ms']:.0f})")
+    for key, m in matched.items():
+        mt = timing[key] = dict(_jaxrod_row(m["n"], m["r"], m["first"], m["times"], ref), refine=m["refine"])
+        log(f"  jaxrod extrapolated n={m['n']}, refine={m['refine']:g}: {mt['median_ms']:.0f} ms "
+            f"(min {mt['min_ms']:.0f})")
+        mo = timing[f"{key}_one_program"] = dict(_jaxrod_row(m["n"], m["r_one"], m["first_one"], m["times_one"], ref),
+                                                 refine=m["refine"])
+        log(f"  jaxrod extrapolated n={m['n']}, refine={m['refine']:g}, one program: {mo['median_ms']:.0f} ms "
+            f"(min {mo['min_ms']:.0f})")
 
     if not args.quick:
         sc8 = scene(N_PLAIN)
@@ -751,7 +785,7 @@ def main(argv=None):
     res["timing"] = timing
     res["auto_settings"] = dict(formulation="folded", **SETTINGS, DS=STAGE_DS, NTST=res["auto_ntst"])
     res["ratios"] = {}
-    for key in ("extrapolated", "matched", "matched_one_program", "plain"):
+    for key in ("extrapolated", "matched", "matched_one_program", "graded", "graded_one_program", "plain"):
         j = timing.get(key)
         if j is None:
             continue
