@@ -24,8 +24,15 @@ import functools
 import hashlib
 import os
 import pathlib
+import threading
 
 EXPORT_SUFFIX = ".jaxexport"
+
+_TRACING = threading.Lock()
+"""Held while a program is traced and lowered (pure Python, under the GIL). Two queries
+exported side by side (`jaxrod snap-angles`' two meshes) then trace one after the other, and
+the first compiles (XLA, off the GIL) while the second traces, instead of both tracing at half
+speed and compiling late."""
 
 
 @functools.lru_cache(maxsize=1)
@@ -107,7 +114,8 @@ def call(name: str, fn, scene, directory: str | None = None):
             return _call(exp, leaves), "loaded"
         except Exception:  # noqa: BLE001 - a damaged file is replaced below
             pass
-    exp = export.export(jax.jit(flat))(*leaves)
+    with _TRACING:
+        exp = export.export(jax.jit(flat))(*leaves)
     try:
         os.makedirs(directory, exist_ok=True)
         tmp = f"{path}.{os.getpid()}.tmp"
