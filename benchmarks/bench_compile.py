@@ -507,12 +507,13 @@ def _markdown(res):
                      f"{r['cache_files_after']} | {r['output_ok']} |")
         cold = next((r for r in cli["runs"] if r["run"] == "cold" and not r.get("skipped")), None)
         big = ", ".join(f"`{t['name']}` {t['compile_s']:.1f} s" for t in cold["top_programs"][:2]) if cold else ""
-        L += ["", "The command's default is Richardson extrapolation (`--no-extrapolate` turns it off): it runs "
-              "`jr.snap_angles_extrapolated` (`snap_angles` at N = 100 and at N = 200) as one program"
+        L += ["", "The command's default is Richardson extrapolation (`--no-extrapolate` turns it off): the values "
+              "of `jr.snap_angles_extrapolated` from `snap_angles` at N = 100 and at N = 200, two programs, one per "
+              "mesh, compiled in the fast mode unless `JAXROD_COMPILE` says otherwise"
               + (f" (the largest programs of the cold run: {big})" if big else "") + ". "
-              "The first run exports that program (`jax.export`) beside the XLA cache; a warm run loads it, "
-              "so it neither traces nor lowers the library, and reads the executable from the persistent "
-              "cache."]
+              "The first run exports each (`jax.export`; one traces while the other compiles) beside the XLA "
+              "cache; a warm run loads both, side by side, so it neither traces nor lowers the library, and "
+              "reads the executables from the persistent cache."]
     return "\n".join(L) + "\n"
 
 
