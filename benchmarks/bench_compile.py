@@ -86,6 +86,7 @@ ENTRIES = {
     "solve_equilibrium": ("jr.solve_equilibrium(scene, theta0), theta0 = jr.buckled_guess(scene, up=False)", True),
     "stability": ('jr.stability(eq), eq = jr.initial_state(scene, "down")', True),
     "snap_angles": ("jr.snap_angles(scene)", True),
+    "snap_angles_unpolished": ("jr.snap_angles(scene, polish=False) (no extended-system refinement)", False),
     "snap_angles_extrapolated": ("jr.snap_angles_extrapolated(scene) (N = 100 and 200)", False),
     "hysteresis": ("jr.hysteresis(scene)", False),
     "phase_diagram": (f"jr.phase_diagram([60], {PHASE_GAPS}, n=100, progress=False)", False),
@@ -177,6 +178,8 @@ def _setup(jr, name):
         return (lambda: jr.stability(eq)), (jr.stability, (eq,))
     if name == "snap_angles":
         return (lambda: jr.snap_angles(scene)), (jr.snap_angles, (scene,))
+    if name == "snap_angles_unpolished":
+        return (lambda: jr.snap_angles(scene, polish=False)), None
     if name == "snap_angles_extrapolated":
         return (lambda: jr.snap_angles_extrapolated(scene)), None
     if name == "hysteresis":
