@@ -22,6 +22,8 @@ Everything is differentiable like [`jaxrod.snap_angles`][] (a fixed linear combi
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array
@@ -142,5 +144,24 @@ def snap_angles_extrapolated(scene: Scene, *, continue_after_snap: bool = False,
     fine_scene = refined_scene(scene)
     fine, coarse = concurrently(lambda: snap_angles(fine_scene, continue_after_snap=continue_after_snap, **kwargs),
                                 lambda: snap_angles(scene, continue_after_snap=continue_after_snap, **kwargs))
-    return ExtrapolatedSnapAngles(up=extrapolate_path(coarse.up, fine.up), down=extrapolate_path(coarse.down, fine.down),
-                                  coarse=coarse, fine=fine, n_coarse=scene.mesh.n, n_fine=fine_scene.mesh.n)
+    up, down = _extrapolate_paths(*(_read(getattr(m, d)) for m in (coarse, fine) for d in ("up", "down")))
+    return ExtrapolatedSnapAngles(up=up, down=down, coarse=coarse, fine=fine, n_coarse=scene.mesh.n,
+                                  n_fine=fine_scene.mesh.n)
+
+
+_FIELDS = ("snaps", "kind", "clicks", "alpha_c", "fold_height_before", "fold_height_after", "result", "start_result",
+           "refine_result")
+
+
+def _read(path):
+    """The fields of a path that [`extrapolate_path`][] reads."""
+    return {k: getattr(path, k) for k in _FIELDS}
+
+
+@eqx.filter_jit
+def _extrapolate_paths(coarse_up, coarse_down, fine_up, fine_down):
+    """Both paths' [`extrapolate_path`][] (from the fields it reads) as one small compiled
+    program: called eagerly, its few dozen scalar operations cost about 2 ms of dispatch, an
+    eighth of the whole query at N = 30 + 60."""
+    ns = lambda d: SimpleNamespace(**d)  # noqa: E731
+    return (extrapolate_path(ns(coarse_up), ns(fine_up)), extrapolate_path(ns(coarse_down), ns(fine_down)))
