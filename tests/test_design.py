@@ -67,8 +67,8 @@ def test_snap_speed_term_with_and_without_dynamics(monkeypatch):
     term is built (default tol 1 % of the target; unknown `jaxrod.snap_speed` options are
     refused, naming them). Without it (hidden here) the term and both studies refuse with
     NotImplementedError before computing anything. (`actuator_study` is not among them: it
-    runs `jaxrod.simulate`, not `snap_speed`. This test used to expect its refusal too and
-    was skipped whenever the dynamics existed, i.e. always.)"""
+    runs `jaxrod.simulate`, not `snap_speed`.) `jaxrod` imports its dynamics on first use, so
+    hiding the name also takes it off the list of names imported that way."""
     assert ds.dynamics_available() and callable(jr.snap_speed)
     t = ds.SnapSpeed(20.0)
     assert (t.target, t.tol, t.weight, t.direction) == (20.0, 0.2, 1.0, "up")
@@ -76,6 +76,7 @@ def test_snap_speed_term_with_and_without_dynamics(monkeypatch):
     with pytest.raises(ValueError, match="options"):
         ds.SnapSpeed(20.0, wobble=1.0)
     monkeypatch.delattr(jr, "snap_speed")
+    monkeypatch.setattr(jr, "_DYNAMICS", tuple(n for n in jr._DYNAMICS if n != "snap_speed"))
     assert not ds.dynamics_available()
     with pytest.raises(NotImplementedError, match="dynamics"):
         ds.SnapSpeed(20.0)
