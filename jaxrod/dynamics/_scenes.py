@@ -148,9 +148,8 @@ def _brink_start(scene, alpha_c, theta_c, force_c, mode, exists, sgn, past, nudg
     a = alpha_c + sgn * past
     sc_c = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (alpha_c, alpha_c))
     sc_run = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (a, a))
-    if mode is None:  # a `snap` computed without the polish carries no mode: the lowest one
-        K = kkt.structured(theta_c, force_c, sc_c)
-        mode = kkt.modes(K, kkt.smallest_eigenvalues(K, 1))[:, 0]
+    if mode is None:  # a `snap` computed without the polish carries no mode: the critical one
+        mode = kkt.critical_mode(kkt.structured(theta_c, force_c, sc_c))
     theta0 = nudge_start(theta_c, mode, sc_run, sgn, nudge)
     ok = exists & jnp.all(jnp.isfinite(theta_c)) & jnp.all(jnp.isfinite(mode))
     return Start(sc_run, theta0, Protocol(a, a), sgn, alpha_c, _bending(theta_c, sc_c, discretize(sc_c)), ok)
