@@ -9,8 +9,8 @@ Run from the repository root (about 3 minutes on 2 cores):
 2N (same grading) as $q_{2N}+(q_{2N}-q_N)/3$, which removes the discretization's $h^2$ error
 term. On a single mesh, grading the mesh at the crease (`refine > 1`) does not pay at
 s0 = 0.02 L (`convergence_alpha_c.md`: its error is not at the crease). After extrapolation
-the remainder is of higher order, and there the crease, where the natural curvature varies
-over 2 s0, dominates: a graded mesh reaches a given accuracy with fewer segments.
+the remainder is of higher order; this benchmark measures whether grading pays there, where
+the natural curvature varies over 2 s0.
 
 For fold angles Psi0 = 30 ... 150 deg and gaps G/L = 0.5, 0.8 (s0 = 0.02 L, symmetric clamp
 rotation; strips that would pass through themselves at smaller gaps are left out), both
