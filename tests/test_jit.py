@@ -153,3 +153,30 @@ def test_concurrently_runs_calls_in_threads_and_keeps_their_meaning(monkeypatch)
     names.clear()
     _misc.concurrently(lambda: call(a), lambda: call(a))
     assert set(names) == {threading.current_thread().name}
+
+
+def test_lowered_first_lowers_once_per_key_and_only_at_the_top_level():
+    """`lowered_first` traces and lowers before the first call of a key at the top level (under
+    its lock), not again for that key, and not inside a transformation; its value is the
+    call's."""
+    from jaxrod import _misc
+
+    f = jax.jit(lambda x: 2.0 * x)
+    lowered = []
+
+    class Counting:
+        def lower(self, *a, **k):
+            lowered.append(a)
+            return f.lower(*a, **k)
+
+        def __call__(self, *a, **k):
+            return f(*a, **k)
+
+    g = Counting()
+    key = ("test", object())
+    assert float(_misc.lowered_first(g, key, jnp.asarray(1.5))) == 3.0 and len(lowered) == 1
+    assert float(_misc.lowered_first(g, key, jnp.asarray(2.0))) == 4.0 and len(lowered) == 1
+    other = ("test", object())
+    out = jax.jit(lambda x: _misc.lowered_first(g, other, x))(jnp.asarray(1.0))
+    assert float(out) == 2.0 and len(lowered) == 1 and other not in _misc._LOWERED
+    assert not _misc._LOWERING.locked()

@@ -25,12 +25,13 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array
 
 from ..model import Mesh, Scene
 from ._snap import SnapAngles, SnapPath, snap_angles
-from .._misc import concurrently
+from .._misc import concurrently, lowered_first
 from ..results import RESULTS
 
 
@@ -142,8 +143,13 @@ def snap_angles_extrapolated(scene: Scene, *, continue_after_snap: bool = False,
     landed states, and skipping it saves about a quarter of the run (N = 60 + 120: 116 ms ->
     85 ms on 2 cores); pass True to keep it in `coarse` and `fine`."""
     fine_scene = refined_scene(scene)
-    fine, coarse = concurrently(lambda: snap_angles(fine_scene, continue_after_snap=continue_after_snap, **kwargs),
-                                lambda: snap_angles(scene, continue_after_snap=continue_after_snap, **kwargs))
+    kwargs = dict(kwargs, continue_after_snap=continue_after_snap)
+
+    def run(sc):
+        key = ("snap_angles", jax.tree.structure(sc), str(jnp.result_type(sc.strip.psi0)), repr(sorted(kwargs.items())))
+        return lowered_first(snap_angles, key, sc, **kwargs)
+
+    fine, coarse = concurrently(lambda: run(fine_scene), lambda: run(scene))
     up, down = _extrapolate_paths(*(_read(getattr(m, d)) for m in (coarse, fine) for d in ("up", "down")))
     return ExtrapolatedSnapAngles(up=up, down=down, coarse=coarse, fine=fine, n_coarse=scene.mesh.n,
                                   n_fine=fine_scene.mesh.n)
