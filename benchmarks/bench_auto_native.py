@@ -401,7 +401,10 @@ def matched_n(ref, log, candidates=MATCHED_CANDIDATES, refine=1.0):
         try:
             r = _block(jr.snap_angles_extrapolated(scene(n, refine)))
         finally:
-            os.environ.pop("JAXROD_COMPILE") if before is None else os.environ.update(JAXROD_COMPILE=before)
+            if before is None:
+                del os.environ["JAXROD_COMPILE"]
+            else:
+                os.environ["JAXROD_COMPILE"] = before
         errs = [abs(math.degrees(float(getattr(r, p).alpha_c)) - ref[p]["alpha_c_deg"]) for p in ("up", "down")]
         kinds = all(jr.KIND_NAMES[int(getattr(r, p).kind)] == ref[p]["kind"] for p in ("up", "down"))
         log(f"  matched accuracy, refine = {refine:g}: n = {n} + {2 * n}: errors {errs[0]:.1e} / {errs[1]:.1e} deg, "
