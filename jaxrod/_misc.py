@@ -90,7 +90,10 @@ def concurrently(*calls):
     return (first,) + tuple(call() if r is _MISMATCH else r for call, r in zip(calls[1:], rest))
 
 
-_LOWERING = threading.Lock()
+TRACING = threading.Lock()
+"""Held while a first call's program is traced and lowered (pure Python, under the GIL):
+[`lowered_first`][] and the CLI's exports take it, so that of two first calls on two threads
+one compiles (XLA, off the GIL) while the other traces."""
 _LOWERED = set()
 
 
@@ -106,7 +109,7 @@ def lowered_first(fun, key, *args, **kwargs):
     cores. The call itself reuses the lowering. Later calls for `key` skip the lock (a warm
     `.lower` costs about 0.2 ms)."""
     if key not in _LOWERED and _top_level():
-        with _LOWERING:
+        with TRACING:
             fun.lower(*args, **kwargs)
         _LOWERED.add(key)
     return fun(*args, **kwargs)

@@ -179,4 +179,4 @@ def test_lowered_first_lowers_once_per_key_and_only_at_the_top_level():
     other = ("test", object())
     out = jax.jit(lambda x: _misc.lowered_first(g, other, x))(jnp.asarray(1.0))
     assert float(out) == 2.0 and len(lowered) == 1 and other not in _misc._LOWERED
-    assert not _misc._LOWERING.locked()
+    assert not _misc.TRACING.locked()

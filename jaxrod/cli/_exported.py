@@ -24,15 +24,8 @@ import functools
 import hashlib
 import os
 import pathlib
-import threading
 
 EXPORT_SUFFIX = ".jaxexport"
-
-_TRACING = threading.Lock()
-"""Held while a program is traced and lowered (pure Python, under the GIL). Two queries
-exported side by side (`jaxrod snap-angles`' two meshes) then trace one after the other, and
-the first compiles (XLA, off the GIL) while the second traces, instead of both tracing at half
-speed and compiling late."""
 
 
 @functools.lru_cache(maxsize=1)
@@ -114,7 +107,11 @@ def call(name: str, fn, scene, directory: str | None = None):
             return _call(exp, leaves), "loaded"
         except Exception:  # noqa: BLE001 - a damaged file is replaced below
             pass
-    with _TRACING:
+    from .._misc import TRACING
+
+    # two queries exported side by side (`jaxrod snap-angles`' two meshes) trace one after the
+    # other: the first compiles while the second traces
+    with TRACING:
         exp = export.export(jax.jit(flat))(*leaves)
     try:
         os.makedirs(directory, exist_ok=True)
