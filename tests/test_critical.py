@@ -14,8 +14,8 @@ import pytest
 
 import jaxrod as jr
 from jaxrod.linalg import kkt
-from jaxrod.branches._critical import (_cusp_residual, _fold_residual, _jacobian_fn, _solver_fn, _sym_residual,
-                                      extended_jacobian)
+from jaxrod.branches._critical import (_cusp_residual, _fold_residual, _jacobian_fn, _one_system, _padding,
+                                      _solver_fn, _sym_residual, extended_jacobian)
 from helpers import central_difference, count_compiles
 
 
@@ -110,6 +110,35 @@ def test_extended_jacobians_regular(snap, base, refine):
     assert s[-1] / s[0] < 1e-9
 
 
+def test_branch_point_in_fold_slots_is_the_symmetric_system():
+    """The branch-point system posed in the fold system's slots (`_one_system`) is the
+    symmetric system plus "slot = 0" for every slot it does not use: at a point of the
+    symmetric subspace its residual holds the symmetric system's residual in the kept rows
+    and zero elsewhere, and its Jacobian is the symmetric system's beside an identity (the
+    rows and columns picked by `_padding`), so it is regular exactly where that is."""
+    scene, parameter = jr.make_scene(60, 0.5, n=16), jr.SymmetricAlpha()
+    n, H = 16, 8
+    rng = np.random.default_rng(3)
+    ell = jnp.asarray(rng.normal(size=n))
+    y = jnp.asarray(rng.normal(size=n + 3)) * 0.5
+    z = jnp.zeros(2 * n + 5).at[:H].set(y[:H]).at[n].set(y[H]).at[n + 2].set(y[H + 1])
+    z = z.at[n + 3:n + 3 + H].set(y[H + 2:2 * H + 2]).at[2 * n + 4].set(y[2 * H + 2])
+    res = _one_system(n, True, parameter, ell)[1]
+    r, J = jax.jit(lambda z: (res(z, scene), jax.jacfwd(lambda z: res(z, scene))(z)))(z)
+    r_sym, J_sym = jax.jit(lambda y: (_sym_residual(y, scene, parameter, ell),
+                                      jax.jacfwd(lambda y: _sym_residual(y, scene, parameter, ell))(y)))(y)
+    idx, sign, keep, slot = _padding(n)
+    rows = np.flatnonzero(keep)  # the symmetric system's equations, in its own order
+    cols = np.concatenate([np.arange(H), [n, n + 2], n + 3 + np.arange(H), [2 * n + 4]])  # its unknowns
+    np.testing.assert_allclose(r[rows], r_sym, rtol=0, atol=1e-13)
+    np.testing.assert_array_equal(r[keep == 0], 0.0)
+    np.testing.assert_allclose(J[np.ix_(rows, cols)], J_sym, rtol=0, atol=1e-12 * float(jnp.max(jnp.abs(J_sym))))
+    pads = np.setdiff1d(np.arange(2 * n + 5), cols)
+    np.testing.assert_array_equal(J[np.ix_(rows, pads)], 0.0)
+    np.testing.assert_array_equal(J[np.ix_(np.flatnonzero(keep == 0), np.arange(2 * n + 5))],
+                                  np.eye(2 * n + 5)[slot[keep == 0]])
+
+
 def _batched(refine, start):
     """vmap over parameter rows (the same batched compile serves FD and the vmap test)."""
     return jax.vmap(lambda p: _pick(refine(p, *start)))
@@ -195,6 +224,8 @@ def test_structured_jacobian_equals_autodiff(case):
                ("cusp", lambda z: _cusp_residual(z, scene, parameter, ell), jnp.append(z, 0.45))]
     if case != "one_sided":  # the symmetric system needs mirror-symmetric actuation
         systems.append(("sym", lambda y: _sym_residual(y, scene, parameter, ell), z[:n + 3]))
+        # the branch-point system in the fold system's slots, as `critical_point` solves it
+        systems.append(("fold", lambda z: _one_system(n, True, parameter, ell)[1](z, scene), z))
     for kind, res, x in systems:
         dense, structured = jax.jit(lambda x: (jax.jacfwd(res)(x), _jacobian_fn(res, scene, n, kind)(x)))(x)
         assert structured.shape == dense.shape

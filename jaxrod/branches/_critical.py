@@ -26,7 +26,10 @@ $(\theta_{1..N/2},\mu_x,\alpha,v_{\theta,1..N/2},v_{\mu_y})$, and the equations 
 independent halves of $F$ (in $\mathrm{Fix}(S)$) and $\mathsf Kv$ (in $\mathrm{Fix}(-S)$),
 plus $\ell^\top v_\theta=1$. This system is regular at a simple symmetry-breaking
 bifurcation (Werner & Spence 1984); `tests/test_critical.py` checks its Jacobian's
-condition number numerically.
+condition number numerically. [`critical_point`][] solves it in the fold system's
+$2N+5$ slots, every unused slot pinned to zero by an equation of its own (`_one_system`):
+one residual, one Newton loop, one Jacobian program and one block solve serve both kinds,
+and the kind chooses only constant masks (the compiled program of one system, not two).
 
 $\ell = h\odot v_0$ with $v_0$ the starting mode ($h$: segment lengths).
 
@@ -37,7 +40,7 @@ angles $\theta$ and mode angles $v_\theta$ only within $|i-j|\le1$. Three colour
 $\alpha$, $v_\mu$) and one reverse-mode probe per remaining row (the constraint rows of
 $F$ and $\mathsf Kv$, $\ell^\top v_\theta$) give every entry: 11 forward and 5 reverse
 probes for the fold system instead of $2N+5$ forward ones (9 and 3 for the branch-point
-system, 12 and 6 for the cusp's). Each Newton step solves with it by block elimination
+system on its own, 12 and 6 for the cusp's). Each Newton step solves with it by block elimination
 ([`_block_solve`][]): two tridiagonal solves for the angle blocks and a Schur complement of
 the 5 (3, 6) remaining unknowns, $O(N)$ instead of a dense LU's $O(N^3)$ (N = 120: 66 us
 instead of 491 us per solve). With self-contact the angle blocks are dense: `jax.jacfwd`
@@ -144,6 +147,63 @@ def _sym_residual(y, scene, parameter, ell):
     gt, gm = _grad(scene, parameter, t, m, a)
     kt, km = _hvp(scene, parameter, t, m, a, vt, vm)
     return jnp.concatenate([gt[:H], gm[:1], kt[:H], km[1:], (jnp.dot(ell, vt) - 1.0)[None]])
+
+
+# ----- both kinds as one system in the fold system's layout -----------------------------
+
+def _padding(N):
+    r"""The branch-point system in the fold system's $2N+5$ slots $(\theta,\mu,\alpha,v_\theta,v_\mu)$
+    (numpy): `idx`, `sign` (the full unknowns are `sign * z[idx]`: $\theta=(a,-\bar a)$ from
+    the first $N/2$ angle slots, $\mu=(\mu_x,0)$, $v_\theta=(c,\bar c)$, $v_\mu=(0,v_{\mu_y})$,
+    $\bar{\ }$ the reversal), `keep` (the rows of the fold residual $(F_\theta,F_\mu,
+    (\mathsf Kv)_\theta,(\mathsf Kv)_\mu,\ell^\top v_\theta-1)$ that are the branch-point system's
+    equations) and `slot` (the slot each other row pins to zero instead)."""
+    H = N // 2
+    half = np.concatenate([np.arange(H), np.arange(H)[::-1]])
+    idx = np.concatenate([half, [N, N, N + 2], N + 3 + half, [2 * N + 4, 2 * N + 4]])
+    sign = np.concatenate([np.ones(H), -np.ones(H), [1.0, 0.0, 1.0], np.ones(N), [0.0, 1.0]])
+    first = np.concatenate([np.ones(H), np.zeros(H)])
+    keep = np.concatenate([first, [1.0, 0.0], first, [0.0, 1.0, 1.0]])
+    slot = np.concatenate([np.arange(N), [N, N + 1], N + 3 + np.arange(N), [2 * N + 3, 2 * N + 4, N + 2]])
+    return idx, sign, keep, slot
+
+
+def _one_system(N, bp, parameter, ell):
+    r"""`(expand, res)`: the extended system of a fold, or where `bp` (traced bool) of a
+    branch point, as one residual on the fold system's $2N+5$ slots, so that one Newton loop,
+    one Jacobian program and one block solve serve both kinds.
+
+    The branch-point system (unknowns $y$, $N+3$) sits in the slots as `_padding` says, and
+    every slot it does not use gets the equation "slot = 0":
+    $R(z)=k\odot R_{\rm fold}(Ez)+(1-k)\odot Pz$, with $E$ the expansion (`expand`; the
+    identity for a fold), $k$ the rows kept and $P$ the slot of each other row. Its Jacobian
+    is $\mathrm{diag}(J_{\rm sym}, I)$ up to a permutation, so it is regular exactly where
+    the branch-point system is, and it keeps the fold system's sparsity: an angle row
+    $i<N/2$ depends on the slots $i-1,i,i+1$ (the mirror image of $\theta_{N/2}$ is slot
+    $N/2-1$), a padded row on its own slot."""
+    idx, sign, keep, slot = _padding(N)
+    # the choice as a float 0 or 1 (a derivative rule may close over float values only)
+    b = jnp.asarray(bp, ell.dtype)
+    keep = b * keep + (1.0 - b)
+
+    def expand(z):
+        return b * (sign * z[idx]) + (1.0 - b) * z
+
+    def res(z, sc):
+        return keep * _fold_residual(expand(z), sc, parameter, ell) + (1.0 - keep) * z[slot]
+
+    return expand, res
+
+
+def _sym_slots(t, m, a, vt, vm):
+    """The branch-point system's start (`_sym_pack`) in the fold system's slots (`_padding`),
+    the unused slots zero."""
+    y = _sym_pack(t, m, a, vt, vm)
+    H = t.shape[0] // 2
+    z = jnp.zeros(2 * t.shape[0] + 5, t.dtype)
+    N = t.shape[0]
+    return (z.at[:H].set(y[:H]).at[N].set(y[H]).at[N + 2].set(y[H + 1])
+            .at[N + 3:N + 3 + H].set(y[H + 2:2 * H + 2]).at[2 * N + 4].set(y[2 * H + 2]))
 
 
 # ----- Newton with an implicit-derivative final step ------------------------------------
@@ -283,17 +343,14 @@ def _solver_fn(scene, N, kind):
     return lambda J, r: _block_solve(J, r, n, rows, cols)
 
 
-def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True, jac=None, solve=batched.solve, neutral=None):
+def _newton(res, z0, max_steps, tol_alpha, idx_alpha, jac=None, solve=batched.solve, neutral=None):
     """Plain Newton on res(z) = 0 with dense Jacobians (`jac`, default `jax.jacfwd(res)`),
     each step `solve(J, -res(z))` (default: a dense LU).
 
     Returns `(z, k, done, J)`: `J` the Jacobian at the returned `z` (the implicit step's),
     from one last pass of the loop that evaluates it and takes no step, so that one copy of
     the Jacobian's program serves the iterations and the derivative; `neutral` (default the
-    identity; `_neutral_jacobian` for `_block_solve`) where the loop did not run or `z` is
-    not finite. An inactive call (the system `kind` does not
-    select) does not run the loop: under `vmap` the loop then runs only as long as the
-    members that need it."""
+    identity; `_neutral_jacobian` for `_block_solve`) where `z` is not finite."""
     jac = jax.jacfwd(res) if jac is None else jac
     neutral = jnp.eye(z0.shape[0], dtype=z0.dtype) if neutral is None else neutral
 
@@ -309,11 +366,10 @@ def _newton(res, z0, max_steps, tol_alpha, idx_alpha, active=True, jac=None, sol
         converged = (jnp.abs(dz[idx_alpha]) < tol_alpha) & (jnp.max(jnp.abs(dz)) < 1e3 * tol_alpha)
         return z + dz, k + jnp.where(last, 0, 1), done | (~last & converged), J, last
 
-    active = jnp.asarray(active, bool)
     z, k, done, J, final = lax.while_loop(cond, body, (z0, jnp.zeros((), jnp.int32), jnp.zeros((), bool), neutral,
-                                                       ~active))
+                                                       jnp.zeros((), bool)))
     J = jnp.where(final & jnp.all(jnp.isfinite(z)), J, neutral)
-    return z, k, done & active, J
+    return z, k, done, J
 
 
 def _implicit_step(res, z, jac_z, scene, solve=batched.solve):
@@ -365,7 +421,7 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
     `kind`: 1 fold (full Moore-Spence system), 2 symmetry-breaking branch point
     (symmetric state, asymmetric mode; `parameter` must be `SymmetricAlpha`, or `Gap` for a
     scene with mirror-symmetric clamps, $\alpha_L=\alpha_R$). `kind` may
-    be traced (both systems are then solved and one selected). `tol`: Newton stops when
+    be traced (both kinds are one system, see the module docstring). `tol`: Newton stops when
     the $\alpha$ update is below `tol` (rad).
 
     **Returns:** a [`jaxrod.CriticalPoint`][]; differentiable with respect to every float
@@ -390,56 +446,32 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
     P = jax.jacfwd(lambda mm: _grad(scene_sg, parameter, theta, mm, alpha)[0])(force)  # (N, 2)
     vm0 = -batched.lstsq2(P, gt0)
     kind = jnp.asarray(kind)
-
-    outs = []
     # the branch-point system needs a mirror-symmetric problem: symmetric actuation, or the
     # gap of a scene whose clamps are symmetric (alpha_L = alpha_R, e.g. both 0)
     symmetric = isinstance(parameter, (SymmetricAlpha, Gap))
-    outs_kinds = (KIND_FOLD, KIND_BRANCH_POINT) if symmetric else (KIND_FOLD,)
-    for which in outs_kinds:
-        if which == KIND_FOLD:
-            def res(z, sc):
-                return _fold_residual(z, sc, parameter, ell)
-            z0 = _fold_pack(theta, force, alpha, mode, vm0)
-            unpack = _fold_unpack
-            ia = N + 2
-        else:
-            def res(z, sc):
-                return _sym_residual(z, sc, parameter, ell)
-            z0 = _sym_pack(theta, force, alpha, mode, vm0)
-            unpack = _sym_unpack
-            ia = N // 2 + 1
-        active = (kind == which) | (len(outs_kinds) == 1)
-        system = "fold" if which == KIND_FOLD else "sym"
-        jac = _jacobian_fn(lambda z: res(z, scene_sg), scene_sg, N, system)
-        solve = _solver_fn(scene_sg, N, system)
-        neutral = _neutral_jacobian(z0.shape[0], N, system, dtype)
-        z, k, done, J = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, ia, active, jac, solve, neutral)
-        finite = jnp.all(jnp.isfinite(z))
-        # The system not selected by `kind` (and a failed one) is singular or non-finite: its
-        # derivative rule uses the start point and a neutral Jacobian, so that no NaN reaches the
-        # gradient of the selected one (a zero cotangent times inf is NaN).
-        z_use = jnp.where(active & finite, z, z0)
-        J = jnp.where(active & finite & jnp.all(jnp.isfinite(J)), J, neutral)
-        r = jnp.max(jnp.abs(res(z, scene_sg)))
-        # A branch point exists only in a mirror-symmetric scene; its derivative is that of
-        # the symmetric family, taken through the scene's mirror-symmetric part
-        sc_d = scene if which == KIND_FOLD else mirror_symmetric_part(scene)
-        # the neutral Jacobian above keeps the derivative of the unselected system finite
-        z = jnp.where(active & finite, _implicit_step(res, sg(z_use), J, sc_d, solve), z)
-        t, m, a, vt, vm = unpack(z, N)
-        result = RESULTS.where(done & finite, RESULTS.successful,
-                               RESULTS.where(finite, RESULTS.max_steps_reached, RESULTS.nonfinite))
-        outs.append((which, (t, m, a, vt, vm, r, k), result))
-
-    if len(outs) == 1:
-        _, vals, result = outs[0]
-    else:
-        (_, v1, r1), (_, v2, r2) = outs
-        bp = kind == KIND_BRANCH_POINT
-        vals = jax.tree.map(lambda p, q: jnp.where(bp, q, p), v1, v2)
-        result = RESULTS.where(bp, r2, r1)
-    t, m, a, vt, vm, r, k = vals
+    bp = (kind == KIND_BRANCH_POINT) if symmetric else jnp.zeros((), bool)
+    expand, res = _one_system(N, bp, parameter, ell)
+    z0 = jnp.where(bp, _sym_slots(theta, force, alpha, mode, vm0), _fold_pack(theta, force, alpha, mode, vm0))
+    jac = _jacobian_fn(lambda z: res(z, scene_sg), scene_sg, N, "fold")
+    solve = _solver_fn(scene_sg, N, "fold")
+    neutral = _neutral_jacobian(z0.shape[0], N, "fold", dtype)
+    z, k, done, J = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, N + 2, jac, solve, neutral)
+    finite = jnp.all(jnp.isfinite(z))
+    # a failed system is non-finite or singular: its derivative rule uses the start point
+    # and a neutral Jacobian, so that the gradient stays finite (a zero cotangent times inf is NaN)
+    z_use = jnp.where(finite, z, z0)
+    J = jnp.where(finite & jnp.all(jnp.isfinite(J)), J, neutral)
+    r = jnp.max(jnp.abs(res(z, scene_sg)))
+    # A branch point exists only in a mirror-symmetric scene; its derivative is that of
+    # the symmetric family, taken through the scene's mirror-symmetric part
+    sc_d = scene
+    if symmetric:
+        sc_d = jax.tree.map(lambda p, q: jnp.where(bp, q, p) if eqx.is_inexact_array(q) else p, scene,
+                            mirror_symmetric_part(scene))
+    z = jnp.where(finite, _implicit_step(res, sg(z_use), J, sc_d, solve), z)
+    t, m, a, vt, vm = _fold_unpack(expand(z), N)
+    result = RESULTS.where(done & finite, RESULTS.successful,
+                           RESULTS.where(finite, RESULTS.max_steps_reached, RESULTS.nonfinite))
     nv = jnp.sqrt(jnp.sum(w * vt**2))
     sc = parameter.set(scene, a)
     fh = positions(t, m, sc)[N // 2, 1]
