@@ -227,7 +227,7 @@ def test_structured_jacobian_equals_autodiff(case):
         # the branch-point system in the fold system's slots, as `critical_point` solves it
         systems.append(("fold", lambda z: _one_system(n, True, parameter, ell)[1](z, scene), z))
     for kind, res, x in systems:
-        dense, structured = jax.jit(lambda x: (jax.jacfwd(res)(x), _jacobian_fn(res, scene, n, kind)(x)))(x)
+        dense, structured = jax.jit(lambda x: (jax.jacfwd(res)(x), _jacobian_fn(res, scene, n, kind)(x)[0]))(x)
         assert structured.shape == dense.shape
         np.testing.assert_allclose(structured, dense, rtol=0, atol=1e-13 * float(jnp.max(jnp.abs(dense))),
                                    err_msg=f"{case} {kind}")

@@ -225,7 +225,8 @@ def _structured_jacobian(res, z, n, row_starts, col_starts):
     angle-like block only for $|i-j|\le1$. Those entries come from three colour probes per
     block (forward mode, columns $j \bmod 3$ summed); every other column from its own
     forward probe, every other row from its own reverse probe. Exact (no finite
-    differences): equal to `jax.jacfwd(res)(z)` where the sparsity holds."""
+    differences): equal to `jax.jacfwd(res)(z)` where the sparsity holds. Returns `(J, res(z))`
+    (the residual is the linearization's primal: one evaluation serves both)."""
     M = z.shape[0]
     dtype = z.dtype
     j = np.arange(n)
@@ -252,7 +253,7 @@ def _structured_jacobian(res, z, n, row_starts, col_starts):
     J = J.at[rr, cc].set(JS[pp, rr])
     vjp = jax.linear_transpose(lin, z)  # reverse mode from the same linearization
     rows = jax.vmap(lambda e: vjp(e)[0])(jnp.eye(M, dtype=out.dtype)[dense_rows])
-    return J.at[dense_rows].set(rows)
+    return J.at[dense_rows].set(rows), out
 
 
 def _layout(N, kind):
@@ -264,12 +265,21 @@ def _layout(N, kind):
     return N, (0, N + 2), (0, N + 3)
 
 
+def _with_value(res):
+    """z -> (`jax.jacfwd(res)(z)`, `res(z)`), the residual evaluated once."""
+    def both(z):
+        r = res(z)
+        return r, r
+
+    return jax.jacfwd(both, has_aux=True)
+
+
 def _jacobian_fn(res, scene, N, kind):
-    """z -> the Jacobian of the extended system `kind` ("fold", "sym" or "cusp") of a
-    scene with N segments: structured (`_structured_jacobian`) without self-contact,
-    `jax.jacfwd` with it (dense angle blocks)."""
+    """z -> (the Jacobian, the residual) of the extended system `kind` ("fold", "sym" or
+    "cusp") of a scene with N segments: structured (`_structured_jacobian`) without
+    self-contact, `jax.jacfwd` with it (dense angle blocks)."""
     if scene.contact is not None:
-        return jax.jacfwd(res)
+        return _with_value(res)
     n, rows, cols = _layout(N, kind)
     return lambda z: _structured_jacobian(res, z, n, rows, cols)
 
@@ -344,32 +354,33 @@ def _solver_fn(scene, N, kind):
 
 
 def _newton(res, z0, max_steps, tol_alpha, idx_alpha, jac=None, solve=batched.solve, neutral=None):
-    """Plain Newton on res(z) = 0 with dense Jacobians (`jac`, default `jax.jacfwd(res)`),
+    """Plain Newton on res(z) = 0 (`jac`: z -> (Jacobian, residual), default `jax.jacfwd`),
     each step `solve(J, -res(z))` (default: a dense LU).
 
-    Returns `(z, k, done, J)`: `J` the Jacobian at the returned `z` (the implicit step's),
-    from one last pass of the loop that evaluates it and takes no step, so that one copy of
-    the Jacobian's program serves the iterations and the derivative; `neutral` (default the
-    identity; `_neutral_jacobian` for `_block_solve`) where `z` is not finite."""
-    jac = jax.jacfwd(res) if jac is None else jac
+    Returns `(z, k, done, J, r)`: `J` and `r` the Jacobian and the residual at the returned
+    `z` (the implicit step's), from one last pass of the loop that evaluates them and takes
+    no step, so that one copy of the residual's and the Jacobian's programs serves the
+    iterations, the reported residual and the derivative; `neutral` (default the identity;
+    `_neutral_jacobian` for `_block_solve`) and a NaN residual where `z` is not finite."""
+    jac = _with_value(res) if jac is None else jac
     neutral = jnp.eye(z0.shape[0], dtype=z0.dtype) if neutral is None else neutral
 
     def cond(c):
-        z, _, _, _, final = c
+        z, _, _, _, _, final = c
         return (~final) & jnp.all(jnp.isfinite(z))
 
     def body(c):
-        z, k, done, _, _ = c
-        J = jac(z)
-        last = done | (k >= max_steps)  # J is the Jacobian at the returned z: no step
-        dz = lax.cond(last, lambda: jnp.zeros_like(z), lambda: solve(J, -res(z)))
+        z, k, done, _, _, _ = c
+        J, r = jac(z)
+        last = done | (k >= max_steps)  # J and r are those at the returned z: no step
+        dz = jnp.where(last, 0.0, solve(J, -r))
         converged = (jnp.abs(dz[idx_alpha]) < tol_alpha) & (jnp.max(jnp.abs(dz)) < 1e3 * tol_alpha)
-        return z + dz, k + jnp.where(last, 0, 1), done | (~last & converged), J, last
+        return z + dz, k + jnp.where(last, 0, 1), done | (~last & converged), J, r, last
 
-    z, k, done, J, final = lax.while_loop(cond, body, (z0, jnp.zeros((), jnp.int32), jnp.zeros((), bool), neutral,
-                                                       jnp.zeros((), bool)))
-    J = jnp.where(final & jnp.all(jnp.isfinite(z)), J, neutral)
-    return z, k, done, J
+    z, k, done, J, r, final = lax.while_loop(cond, body, (z0, jnp.zeros((), jnp.int32), jnp.zeros((), bool), neutral,
+                                                          jnp.zeros_like(z0), jnp.zeros((), bool)))
+    there = final & jnp.all(jnp.isfinite(z))
+    return z, k, done, jnp.where(there, J, neutral), jnp.where(there, r, jnp.nan)
 
 
 def _implicit_step(res, z, jac_z, scene, solve=batched.solve):
@@ -455,13 +466,13 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
     jac = _jacobian_fn(lambda z: res(z, scene_sg), scene_sg, N, "fold")
     solve = _solver_fn(scene_sg, N, "fold")
     neutral = _neutral_jacobian(z0.shape[0], N, "fold", dtype)
-    z, k, done, J = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, N + 2, jac, solve, neutral)
+    z, k, done, J, r = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, N + 2, jac, solve, neutral)
     finite = jnp.all(jnp.isfinite(z))
     # a failed system is non-finite or singular: its derivative rule uses the start point
     # and a neutral Jacobian, so that the gradient stays finite (a zero cotangent times inf is NaN)
     z_use = jnp.where(finite, z, z0)
     J = jnp.where(finite & jnp.all(jnp.isfinite(J)), J, neutral)
-    r = jnp.max(jnp.abs(res(z, scene_sg)))
+    r = jnp.max(jnp.abs(r))
     # A branch point exists only in a mirror-symmetric scene; its derivative is that of
     # the symmetric family, taken through the scene's mirror-symmetric part
     sc_d = scene
@@ -562,12 +573,12 @@ def cusp_point(scene, theta, force, alpha, mode, *, parameter: AbstractParameter
     jac = _jacobian_fn(lambda z: res(z, scene_sg), scene_sg, N, "cusp")
     solve = _solver_fn(scene_sg, N, "cusp")
     neutral = _neutral_jacobian(z0.shape[0], N, "cusp", dtype)
-    z, k, done, J = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, 2 * N + 5, jac=jac, solve=solve,
-                            neutral=neutral)
+    z, k, done, J, r = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, 2 * N + 5, jac=jac, solve=solve,
+                               neutral=neutral)
     finite = jnp.all(jnp.isfinite(z))
     z_use = jnp.where(finite, z, z0)
     J = jnp.where(finite & jnp.all(jnp.isfinite(J)), J, neutral)
-    r = jnp.max(jnp.abs(res(z, scene_sg)))
+    r = jnp.max(jnp.abs(r))
     z = jnp.where(finite, _implicit_step(res, sg(z_use), J, scene, solve), z)
     t, m, a, vt, vm = _fold_unpack(z[:-1], N)
     result = RESULTS.where(done & finite, RESULTS.successful,
