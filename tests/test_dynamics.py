@@ -225,10 +225,9 @@ def test_brink_start_gradient_matches_central_differences():
 
 
 def test_brink_from_a_snap_without_polish():
-    """A `snap` computed with `polish=False` carries no critical mode: the brink then takes the
-    critical mode of the constrained Hessian (its eigenvalue nearest zero) at the bisection's
-    critical state. Its start agrees with the polished snap's to the bisection's accuracy
-    (3e-9 rad here)."""
+    """A `snap` computed with `polish=False` carries the bisection's critical mode (at the state
+    just past the critical point): the brink's start agrees with the polished snap's to the
+    bisection's accuracy."""
     sc = jr.make_scene(60.0, 0.5, 0, n=N)
     a = jr.brink(sc, "down")
     b = jr.brink(sc, "down", snap=jr.snap_angles(sc, polish=False))

@@ -59,7 +59,8 @@ class SnapPath(eqx.Module):
     branch unless `continue_after_snap=False`), `result` and `start_result` (below),
     `stop` (the deciding `Branch.stop`), `refine_result` (the RESULTS code of the extended-system refinement of the
     critical point, `jaxrod.critical_point`; where it fails the bisection values are kept),
-    `mode` the critical mode (angle part, unit $L^2$ norm), `jump` the $L^2$ distance of the
+    `mode` the critical mode (angle part, unit $L^2$ norm: the refinement's, or where that is
+    off or fails the bisection's, at the state just past the critical point), `jump` the $L^2$ distance of the
     landed angle field from the critical one (rad; NaN if it does not snap), `stage` the
     index of the `branch` stage that decided the path (holds the critical point; the stages
     before it were supercritical branch points or contact clicks), `clicks` the number of
@@ -203,7 +204,8 @@ def _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bise
     kind = jnp.where(snaps, kind, KIND_NONE).astype(jnp.int32)
     ta, ma, fa, eq_after = _land(scene, parameter, t, m, lam, v, direction, direction > 0, Newton())
     fb = _fh(scene, parameter, t, m, lam)
-    return branch, snaps, kind, t, m, lam, fb, ta, ma, fa, eq_after.converged
+    v = v / jnp.sqrt(jnp.sum(discretize(scene).h * v**2))  # unit L2 norm, as `critical_point`'s
+    return branch, snaps, kind, t, m, lam, fb, ta, ma, fa, eq_after.converged, v
 
 
 def follow_path(scene, start_eq, direction, parameter, settings, bound, bisections, tol, stages=2,
@@ -242,14 +244,15 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
         if continue_after_snap:
             # after a snap the next stage follows the landed branch (to |alpha| = bound or its
             # own loss of stability): the post-snap branch of the hysteresis figures
-            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = run(scene, direction, args)
+            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed, v = run(scene, direction, args)
         else:
             # skip the later stages of a path that has been decided: `run_if`, a loop of at most
             # one pass, not `lax.cond`, which under `vmap` (a batched `done`) would run the whole
             # stage for every member at every stage (2x the continuation work of a phase diagram)
             shapes = jax.eval_shape(lambda a: run(scene, direction, a), args)
             skipped = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
-            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed = run_if(~done, run, skipped, (scene, direction, args))
+            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed, v = run_if(~done, run, skipped,
+                                                                           (scene, direction, args))
         w = discretize(scene).h
         dist = jnp.sqrt(jnp.sum(w * (ta - t) ** 2))
         if scene.contact is None:
@@ -263,7 +266,7 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
         # lost stability but the relaxation past alpha_c found no equilibrium (`landed`
         # False: a loss of stability all the same, whose landing is unknown)
         final = ~done & (~snaps | jumped | ~landed)
-        new_out = (snaps, kind, t, m, lam, fb, ta, ma, fa, br.stop, landed, dist, stage)
+        new_out = (snaps, kind, t, m, lam, fb, ta, ma, fa, br.stop, landed, dist, stage, v)
         out = jax.tree.map(lambda n, o: jnp.where(final, n, o), new_out, out)
         lam_next = lam + direction * 1e-3
         clicks = clicks + (~done & snaps & landed & click).astype(jnp.int32)
@@ -274,13 +277,13 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
     nan = jnp.full((), jnp.nan, dtype)
     out0 = (jnp.zeros((), bool), jnp.zeros((), jnp.int32), start_eq.theta, start_eq.force, nan, nan,
             start_eq.theta, start_eq.force, nan, jnp.full((), -1, jnp.int32), jnp.ones((), bool), nan,
-            jnp.full((), stages - 1, jnp.int32))
+            jnp.full((), stages - 1, jnp.int32), jnp.zeros_like(start_eq.theta))
     lam0 = parameter.get(start_eq.scene)
     ok0 = start_eq.result == RESULTS.successful
     init = (start_eq.theta, start_eq.force, jnp.asarray(lam0, dtype), ok0, jnp.zeros((), bool),
             jnp.zeros((), jnp.int32), out0)
     (_, _, _, _, done, clicks, out), branches = lax.scan(body, init, jnp.arange(stages, dtype=jnp.int32))
-    snaps, kind, t, m, lam, fb, ta, ma, fa, stop, landed, dist, last_stage = out
+    snaps, kind, t, m, lam, fb, ta, ma, fa, stop, landed, dist, last_stage, mode = out
     snaps = snaps & done
     # decided without a snap, but not at the parameter bound (stop 1): the continuation
     # gave up (buffer full, step too small); or never decided (every stage supercritical)
@@ -322,6 +325,7 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
         jump=jnp.where(snaps & landed, dist, nan),
         stage=last_stage,
         clicks=clicks,
+        mode=mode,
     )
 
 
@@ -345,7 +349,8 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
 
     `polish=False` skips the extended-system Newton refinement (`jaxrod.critical_point`):
     $\alpha_c$ is then the bisection value, within ~1e-8 rad of the polished one at
-    `bisections=24`, and carries no gradient (`refine_result` and `mode` are `None`).
+    `bisections=24`, and carries no gradient (`refine_result` is `None`; `mode` is the
+    bisection's).
     Used by [`jaxrod.phase_diagram`][], where the refinement was a third of the cost.
     `continue_after_snap=False` does not follow the landed branch after a snap (the second
     `branch` stage is then empty, `count` 0); the critical angles are the same.
@@ -431,9 +436,7 @@ def _polish(scene_d, path, parameter):
     differentiable alpha_c and critical state. Kept from bisection where it fails."""
     sg = lax.stop_gradient
     a0 = jnp.where(path.snaps, path.alpha_c, 0.0)
-    sc = parameter.set(sg(scene_d), a0)
-    K = kkt.structured(path.theta_before, path.force_before, sc)
-    v = kkt.critical_mode(K)
+    v = path.mode  # the bisection's, just past the critical point
     kind = jnp.where(path.kind == KIND_NONE, KIND_FOLD, path.kind)
     cp = critical_point(scene_d, path.theta_before, path.force_before, a0, v, kind, parameter=parameter)
     # accept only a converged refinement that stays at the bisection point (1e-6 rad)

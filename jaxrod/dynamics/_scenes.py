@@ -33,7 +33,6 @@ import jax.numpy as jnp
 from ._equations import Protocol, check_run_settings
 from ..energy.geometry import discretize
 from ..statics import initial_state
-from ..linalg import kkt
 from ..linalg.batched import solve2
 from .._misc import check_param, dynamics_jit
 from ..branches import snap_angles, snap_routes
@@ -148,8 +147,6 @@ def _brink_start(scene, alpha_c, theta_c, force_c, mode, exists, sgn, past, nudg
     a = alpha_c + sgn * past
     sc_c = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (alpha_c, alpha_c))
     sc_run = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (a, a))
-    if mode is None:  # a `snap` computed without the polish carries no mode: the critical one
-        mode = kkt.critical_mode(kkt.structured(theta_c, force_c, sc_c))
     theta0 = nudge_start(theta_c, mode, sc_run, sgn, nudge)
     ok = exists & jnp.all(jnp.isfinite(theta_c)) & jnp.all(jnp.isfinite(mode))
     return Start(sc_run, theta0, Protocol(a, a), sgn, alpha_c, _bending(theta_c, sc_c, discretize(sc_c)), ok)
