@@ -21,9 +21,9 @@ stops at the next change of $\nu$ (or at $|\alpha|=$`bound`: no second point); b
 on arclength between the last two points, as for $\alpha_c$; then Newton on the extended
 system ([`jaxrod.critical_point`][]), accepted within $10^{-6}$ rad of the bisection
 point. Kind: a fold where the tangent's $\alpha$ component changes sign between the two
-bracketing points, else a branch point. Its mode is the eigenvector of the
-$(\nu_a+2)$-th smallest eigenvalue (the one crossing zero; the lower ones are already
-negative). `alpha_c2` is differentiable in the scene's float leaves (implicit function
+bracketing points, else a branch point. Its mode is the eigenvector of the eigenvalue
+nearest zero at the bisection's state just past the point (the one crossing zero, by
+inverse iteration as for $\alpha_c$; the lower ones are already negative). `alpha_c2` is differentiable in the scene's float leaves (implicit function
 theorem) where the refinement is accepted.
 """
 
@@ -35,7 +35,6 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array
 
-from ..linalg import kkt
 from ..results import RESULTS
 from ..statics import Equilibrium, float_scene, mode_parity
 from .._misc import check_int, check_number, run_if, jit
@@ -93,13 +92,11 @@ def _second(scene_d, path, direction, settings, bound, bisections, tol):
         start = Equilibrium(t0, m0, RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), sc)
         b = continue_branch(sc, start, parameter, direction=direction, bounds=(-bound, bound), settings=settings,
                             stop_on_instability=True, check_contact=False)
-        t, m, lam, _, _ = _refine(scene, parameter, b, settings, tol, bisections)
+        # v: the mode whose eigenvalue crosses zero there (the one nearest zero just past it)
+        t, m, lam, v, _ = _refine(scene, parameter, b, settings, tol, bisections)
         j = b.count - 1
         fold = jnp.sign(b.tau_lam[j - 1]) != jnp.sign(b.tau_lam[j])
-        K = kkt.structured(t, m, parameter.set(scene, lam))
-        ev = kkt.smallest_eigenvalues(K, 3)
         nu_a = b.num_unstable[j - 1]
-        v = kkt.modes(K, ev)[:, jnp.clip(nu_a, 0, 2)]
         asym = (mode_parity(v[:, None])[0] < 0) & _is_mirror_symmetric(t, scene)
         kind = jnp.where(fold | ~asym, KIND_FOLD, KIND_BRANCH_POINT).astype(jnp.int32)
         return b.stop, nu_a, t, m, lam, v, kind
