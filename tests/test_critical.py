@@ -121,15 +121,15 @@ def test_branch_point_in_fold_slots_is_the_symmetric_system():
     rng = np.random.default_rng(3)
     ell = jnp.asarray(rng.normal(size=n))
     y = jnp.asarray(rng.normal(size=n + 3)) * 0.5
-    z = jnp.zeros(2 * n + 5).at[:H].set(y[:H]).at[n].set(y[H]).at[n + 2].set(y[H + 1])
-    z = z.at[n + 3:n + 3 + H].set(y[H + 2:2 * H + 2]).at[2 * n + 4].set(y[2 * H + 2])
+    idx, sign, keep, slot, used = _padding(n)
+    cols = np.concatenate([np.arange(H), [n, n + 2], n + 3 + np.arange(H), [2 * n + 4]])  # its unknowns
+    np.testing.assert_array_equal(used, cols)
+    z = jnp.zeros(2 * n + 5).at[cols].set(y)
     res = _one_system(n, True, parameter, ell)[1]
     r, J = jax.jit(lambda z: (res(z, scene), jax.jacfwd(lambda z: res(z, scene))(z)))(z)
     r_sym, J_sym = jax.jit(lambda y: (_sym_residual(y, scene, parameter, ell),
                                       jax.jacfwd(lambda y: _sym_residual(y, scene, parameter, ell))(y)))(y)
-    idx, sign, keep, slot = _padding(n)
     rows = np.flatnonzero(keep)  # the symmetric system's equations, in its own order
-    cols = np.concatenate([np.arange(H), [n, n + 2], n + 3 + np.arange(H), [2 * n + 4]])  # its unknowns
     np.testing.assert_allclose(r[rows], r_sym, rtol=0, atol=1e-13)
     np.testing.assert_array_equal(r[keep == 0], 0.0)
     np.testing.assert_allclose(J[np.ix_(rows, cols)], J_sym, rtol=0, atol=1e-12 * float(jnp.max(jnp.abs(J_sym))))

@@ -157,7 +157,8 @@ def _padding(N):
     the first $N/2$ angle slots, $\mu=(\mu_x,0)$, $v_\theta=(c,\bar c)$, $v_\mu=(0,v_{\mu_y})$,
     $\bar{\ }$ the reversal), `keep` (the rows of the fold residual $(F_\theta,F_\mu,
     (\mathsf Kv)_\theta,(\mathsf Kv)_\mu,\ell^\top v_\theta-1)$ that are the branch-point system's
-    equations) and `slot` (the slot each other row pins to zero instead)."""
+    equations), `slot` (the slot each other row pins to zero instead) and `used` (the slots of
+    the branch-point system's own unknowns $y$, in `_sym_pack`'s order)."""
     H = N // 2
     half = np.concatenate([np.arange(H), np.arange(H)[::-1]])
     idx = np.concatenate([half, [N, N, N + 2], N + 3 + half, [2 * N + 4, 2 * N + 4]])
@@ -165,7 +166,8 @@ def _padding(N):
     first = np.concatenate([np.ones(H), np.zeros(H)])
     keep = np.concatenate([first, [1.0, 0.0], first, [0.0, 1.0, 1.0]])
     slot = np.concatenate([np.arange(N), [N, N + 1], N + 3 + np.arange(N), [2 * N + 3, 2 * N + 4, N + 2]])
-    return idx, sign, keep, slot
+    used = np.concatenate([np.arange(H), [N, N + 2], N + 3 + np.arange(H), [2 * N + 4]])
+    return idx, sign, keep, slot, used
 
 
 def _one_system(N, bp, parameter, ell):
@@ -181,7 +183,7 @@ def _one_system(N, bp, parameter, ell):
     the branch-point system is, and it keeps the fold system's sparsity: an angle row
     $i<N/2$ depends on the slots $i-1,i,i+1$ (the mirror image of $\theta_{N/2}$ is slot
     $N/2-1$), a padded row on its own slot."""
-    idx, sign, keep, slot = _padding(N)
+    idx, sign, keep, slot, _ = _padding(N)
     # the choice as a float 0 or 1 (a derivative rule may close over float values only)
     b = jnp.asarray(bp, ell.dtype)
     keep = b * keep + (1.0 - b)
@@ -198,12 +200,8 @@ def _one_system(N, bp, parameter, ell):
 def _sym_slots(t, m, a, vt, vm):
     """The branch-point system's start (`_sym_pack`) in the fold system's slots (`_padding`),
     the unused slots zero."""
-    y = _sym_pack(t, m, a, vt, vm)
-    H = t.shape[0] // 2
-    z = jnp.zeros(2 * t.shape[0] + 5, t.dtype)
     N = t.shape[0]
-    return (z.at[:H].set(y[:H]).at[N].set(y[H]).at[N + 2].set(y[H + 1])
-            .at[N + 3:N + 3 + H].set(y[H + 2:2 * H + 2]).at[2 * N + 4].set(y[2 * H + 2]))
+    return jnp.zeros(2 * N + 5, t.dtype).at[_padding(N)[4]].set(_sym_pack(t, m, a, vt, vm))
 
 
 # ----- Newton with an implicit-derivative final step ------------------------------------

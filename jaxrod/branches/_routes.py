@@ -23,8 +23,9 @@ system ([`jaxrod.critical_point`][]), accepted within $10^{-6}$ rad of the bisec
 point. Kind: a fold where the tangent's $\alpha$ component changes sign between the two
 bracketing points, else a branch point. Its mode is the eigenvector of the eigenvalue
 nearest zero at the bisection's state just past the point (the one crossing zero, by
-inverse iteration as for $\alpha_c$; the lower ones are already negative). `alpha_c2` is differentiable in the scene's float leaves (implicit function
-theorem) where the refinement is accepted.
+inverse iteration as for $\alpha_c$; the lower ones are already negative). `alpha_c2` is
+differentiable in the scene's float leaves (implicit function theorem) where the
+refinement is accepted.
 """
 
 from __future__ import annotations
