@@ -40,9 +40,9 @@ class RESULTS(eqx.Enumeration):
         "see jaxrod.clearance."
     )
     derivative_unavailable = (
-        "The extended-system refinement of the critical point did not converge, so alpha_c is the bisection "
-        "value, which carries no derivative (a gradient through it would read zero); the value itself is "
-        "within ~1e-8 rad."
+        "The located critical point does not solve its extended system to tolerance (or that system's "
+        "Newton refinement did not converge), so alpha_c carries no derivative (a gradient through it "
+        "would read zero); the value itself is the bisection's, within ~1e-8 rad."
     )
     mesh_inconsistent = (
         "The two meshes of the extrapolation disagree (one snaps and the other does not, or the kind "

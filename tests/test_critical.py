@@ -1,6 +1,7 @@
 """Critical points on the extended system: refinement to 1e-8 rad, regularity at
-folds and (symmetry-restricted) branch points, implicit gradients against central
-differences, vmap equals loop, no recompilation."""
+folds and (symmetry-restricted) branch points, the located points of `snap_angles` as its
+roots, implicit gradients against central differences, vmap equals loop, no
+recompilation."""
 
 from __future__ import annotations
 
@@ -91,6 +92,59 @@ def test_extended_system_converges_to_1e8(snap, base, refine):
         # the mode is asymmetric at the branch point, symmetric at the fold
         parity = float(jnp.sum(cp.mode * -cp.mode[::-1]) / jnp.sum(cp.mode**2))
         assert parity < -0.999 if int(k) == 2 else parity > 0.999
+
+
+def test_snap_angles_locate_the_extended_systems_root(snap, base, refine):
+    """`snap_angles` locates each critical point by bisection and interpolation of the
+    eigenvalue that crosses zero, without Newton on the extended system: Newton started
+    there moves alpha by at most 1e-12 rad and the state by 1e-8 (a branch point's state is
+    the symmetric projection); the located point's residual is below 1e-10."""
+    for path in (snap.up, snap.down):
+        cp = refine(jnp.asarray(P0), *_start(path))
+        assert cp.result == jr.RESULTS.successful
+        assert abs(float(cp.alpha - path.alpha_c)) < 1e-12
+        assert float(jnp.max(jnp.abs(cp.theta - path.theta_before))) < 1e-8
+        located = jr.branches.located_critical_point(base, *_start(path))
+        assert located.result == jr.RESULTS.successful and float(located.residual) < 1e-10
+
+
+def test_located_critical_point_derivative_and_verdicts(snap, base, refine):
+    """`located_critical_point` (no Newton; the Jacobian assembled inside the derivative
+    rule) has the derivative of `critical_point` at the same root, d(alpha, fold height) /
+    d(Psi0, G, s0) at the branch point and the fold; a point 1e-4 rad off the critical one
+    is `derivative_unavailable`, a non-finite one `nonfinite`."""
+    @jax.jit
+    def loc(p, theta, force, alpha, mode, kind):
+        return jr.branches.located_critical_point(scene_of(base, p), theta, force, alpha, mode, kind)
+
+    for path in (snap.up, snap.down):
+        start = _start(path)
+        J_loc = jax.jacrev(lambda p: _pick(loc(p, *start))[:2])(jnp.asarray(P0))
+        J_newton = jax.jacrev(lambda p: _pick(refine(p, *start))[:2])(jnp.asarray(P0))
+        assert np.all(np.abs(np.asarray(J_loc)) > 1e-4)
+        np.testing.assert_allclose(np.asarray(J_loc), np.asarray(J_newton), rtol=1e-8, atol=1e-12)
+        t, m, a, v, k = start
+        assert loc(jnp.asarray(P0), t, m, a + 1e-4, v, k).result == jr.RESULTS.derivative_unavailable
+        assert loc(jnp.asarray(P0), t * jnp.nan, m, a, v, k).result == jr.RESULTS.nonfinite
+
+
+def test_critical_pair_is_the_eigenvalue_nearest_zero(snap, base):
+    """`kkt.critical_pair` next to a critical point: the eigenvalue of the Sturm bisection
+    (`smallest_eigenvalues`) to 1e-9 relative (plus round-off, 1e-13 of the largest diagonal
+    entry) and its mode (`modes`) to 1e-9, at the critical states of the branch point and
+    the fold moved by +-1e-3 rad (eigenvalues of either sign, 5e-7 to 1e-5 from zero)."""
+    for path in (snap.up, snap.down):
+        sc = jr.SymmetricAlpha().set(base, path.alpha_c)
+        n = path.theta_before.shape[0]
+        for eps in (-1e-3, 1e-3):
+            K = kkt.structured(path.theta_before + eps * jnp.cos(7.0 * jnp.arange(n)), path.force_before, sc)
+            v, lam = kkt.critical_pair(K)
+            ref = kkt.smallest_eigenvalues(K, 2)
+            assert 1e-7 < abs(float(ref[0])) < 1e-2 < float(ref[1])  # isolated, next to zero
+            tol = 1e-9 * abs(float(ref[0])) + 1e-13 * float(jnp.max(jnp.abs(K.diag)))
+            assert abs(float(lam - ref[0])) < tol
+            v_ref = kkt.modes(K, ref[:1])[:, 0]
+            assert abs(abs(float(jnp.dot(v, v_ref))) - 1.0) < 1e-9
 
 
 def test_extended_jacobians_regular(snap, base, refine):

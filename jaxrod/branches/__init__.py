@@ -19,6 +19,7 @@ from ._continuation import LeftAlpha as LeftAlpha
 from ._continuation import RightAlpha as RightAlpha
 from ._continuation import SymmetricAlpha as SymmetricAlpha
 from ._critical import critical_point as critical_point
+from ._critical import located_critical_point as located_critical_point
 from ._critical import CriticalPoint as CriticalPoint
 from ._critical import cusp_point as cusp_point
 from ._critical import mirror_symmetric_part as mirror_symmetric_part

@@ -234,12 +234,15 @@ def _residual_norm(g, scene):
                        jnp.max(jnp.abs(g[1])) / st.length)
 
 
-def corrector(scene, parameter, x0, lam0, tau, ds, steps, tol, guess=None):
+def corrector(scene, parameter, x0, lam0, tau, ds, steps, tol, guess=None, finish=False):
     """Predict by `ds` along `tau` from (x0, lam0) and correct. Returns
     (theta, mu, lam, converged, iterations); `converged` is False also where the corrected
     point lies farther than |ds| from the prediction (in the arclength norm): a jump to
     another branch. `guess` (theta, mu, lam): where Newton starts instead of the prediction
-    (the same equations, the hyperplane `ds` from (x0, lam0) along `tau`)."""
+    (the same equations, the hyperplane `ds` from (x0, lam0) along `tau`). `finish`
+    (static): take one more Newton step once the residual is below `tol`, which leaves the
+    point at round-off instead of up to `tol` off (the critical-point bracket of
+    `jaxrod.snap_angles` interpolates between two such points)."""
     F, F_lam, Kf = _pieces(scene, parameter)
     d = discretize(scene)
     w = d.h
@@ -249,25 +252,27 @@ def corrector(scene, parameter, x0, lam0, tau, ds, steps, tol, guess=None):
     c = w * tt
 
     def body(carry):
-        t, m, lam, k, _ = carry
+        t, m, lam, k, _, _ = carry
         g = F(t, m, lam)
         rs = jnp.dot(c, t - tp) + tl * (lam - lp)
         Kmat = Kf(t, m, lam)
         dt, dm, dl = _bordered_solve(Kmat, F_lam(t, m, lam), c, tl, -g[0], -g[1], -rs)
         res = _residual_norm(g, scene)
         conv = (res <= tol) & (jnp.abs(rs) <= tol)
-        t = jnp.where(conv, t, t + dt)
-        m = jnp.where(conv, m, m + dm)
-        lam = jnp.where(conv, lam, lam + dl)
-        return t, m, lam, k + 1, conv
+        step = ~conv | finish
+        t = jnp.where(step, t + dt, t)
+        m = jnp.where(step, m + dm, m)
+        lam = jnp.where(step, lam + dl, lam)
+        return t, m, lam, k + 1, conv, conv & finish
 
     def cond(carry):
-        t, m, lam, k, conv = carry
+        t, m, lam, k, conv, finished = carry
         finite = jnp.all(jnp.isfinite(t)) & jnp.isfinite(lam)
-        return (~conv) & (k < steps) & finite
+        return ~(conv & (finished | (not finish))) & (k < steps) & finite
 
     start = (tp, mp, lp) if guess is None else guess
-    t, m, lam, k, conv = lax.while_loop(cond, body, (*start, jnp.zeros((), jnp.int32), jnp.zeros((), bool)))
+    false = jnp.zeros((), bool)
+    t, m, lam, k, conv, _ = lax.while_loop(cond, body, (*start, jnp.zeros((), jnp.int32), false, false))
     # a correction longer than the step itself left the branch for another one (at Psi0 =
     # 60 deg, G/L = 0.075 with contact, a step of 0.025 landed 0.42 away, on an unstable
     # branch 18 deg back): not converged, so the step is halved

@@ -56,6 +56,8 @@ this step are not exact).
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -406,6 +408,32 @@ def _implicit_step(res, z, jac_z, scene, solve=batched.solve):
     return root(z, jac_z, arrays, lax.stop_gradient(consts))
 
 
+def _implicit_root(res, z, scene, N, solve, neutral):
+    r"""`_implicit_step` with the Jacobian assembled inside the derivative rule (at `z`, from
+    `res`): the forward program carries no Jacobian. A non-finite Jacobian is replaced by
+    `neutral`, so that the derivative stays finite."""
+    arrays, static = eqx.partition(scene, eqx.is_inexact_array)
+    z = lax.stop_gradient(z)
+    res_c, consts = jax.closure_convert(lambda z, a: res(z, eqx.combine(a, static)), z, arrays)
+    dense = scene.contact is not None  # a derivative rule may close over Python values only
+
+    @jax.custom_jvp
+    def root(z, neutral, arrays, consts):
+        return z
+
+    @root.defjvp
+    def root_jvp(primals, tangents):
+        z, neutral, arrays, consts = primals
+        dp = tangents[2]
+        fn = lambda y: res_c(y, arrays, *consts)  # noqa: E731
+        J, _ = _with_value(fn)(z) if dense else _structured_jacobian(fn, z, *_layout(N, "fold"))
+        J = jnp.where(jnp.all(jnp.isfinite(J)), J, neutral)
+        _, dR = jax.jvp(lambda a: res_c(z, a, *consts), (arrays,), (dp,))
+        return z, -solve(J, dR)
+
+    return root(z, neutral, arrays, lax.stop_gradient(consts))
+
+
 def extended_jacobian(scene, cp: CriticalPoint, parameter: AbstractParameter = SymmetricAlpha()):
     """The Jacobian of the extended system at a refined critical point (dense; for tests:
     its smallest singular value shows regularity). Uses the system `cp.kind` selects."""
@@ -441,13 +469,30 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
         raise ValueError(f"kind must be 1 (fold) or 2 (branch point), got {kind!r}")
     check_int("max_steps", max_steps, lo=1)
     check_number("tol", tol, lo=0.0)
+    p = _problem(scene, theta, force, alpha, mode, kind, parameter)
+    z, k, done, J, r = _newton(p.res_sg, p.z0, max_steps, tol, p.N + 2, p.jac, p.solve, p.neutral)
+    finite = jnp.all(jnp.isfinite(z))
+    # a failed system is non-finite or singular: its derivative rule uses the start point
+    # and a neutral Jacobian, so that the gradient stays finite (a zero cotangent times inf is NaN)
+    z_use = jnp.where(finite, z, p.z0)
+    J = jnp.where(finite & jnp.all(jnp.isfinite(J)), J, p.neutral)
+    z = jnp.where(finite, _implicit_step(p.res, lax.stop_gradient(z_use), J, p.scene_d, p.solve), z)
+    result = RESULTS.where(done & finite, RESULTS.successful,
+                           RESULTS.where(finite, RESULTS.max_steps_reached, RESULTS.nonfinite))
+    return _critical_point(p, z, jnp.max(jnp.abs(r)), k, result)
+
+
+def _problem(scene, theta, force, alpha, mode, kind, parameter):
+    r"""(A namespace:) the extended system of a critical point of `kind` near (`theta`, `force`, `alpha`)
+    with the mode `mode` (normalization $\ell=h\odot v$), its start `z0` in the fold
+    system's slots, and the scene its implicit derivative goes through (for a branch point
+    the scene's mirror-symmetric part)."""
     dtype = theta.dtype
     N = theta.shape[0]
     sg = lax.stop_gradient
     scene_sg = sg(scene)
     theta, force, alpha, mode = sg(theta), sg(force), sg(jnp.asarray(alpha, dtype)), sg(mode)
-    d = discretize(scene_sg)
-    w = d.h
+    w = discretize(scene_sg).h
     mode = mode / jnp.sqrt(jnp.sum(w * mode**2))
     ell = w * mode  # ell . mode = 1
     # starting mode force: K (v, vm) ~ 0 in its mu rows -> least-squares vm from the theta rows
@@ -461,31 +506,52 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
     bp = (kind == KIND_BRANCH_POINT) if symmetric else jnp.zeros((), bool)
     expand, res = _one_system(N, bp, parameter, ell)
     z0 = jnp.where(bp, _sym_slots(theta, force, alpha, mode, vm0), _fold_pack(theta, force, alpha, mode, vm0))
-    jac = _jacobian_fn(lambda z: res(z, scene_sg), scene_sg, N, "fold")
-    solve = _solver_fn(scene_sg, N, "fold")
-    neutral = _neutral_jacobian(z0.shape[0], N, "fold", dtype)
-    z, k, done, J, r = _newton(lambda z: res(z, scene_sg), z0, max_steps, tol, N + 2, jac, solve, neutral)
-    finite = jnp.all(jnp.isfinite(z))
-    # a failed system is non-finite or singular: its derivative rule uses the start point
-    # and a neutral Jacobian, so that the gradient stays finite (a zero cotangent times inf is NaN)
-    z_use = jnp.where(finite, z, z0)
-    J = jnp.where(finite & jnp.all(jnp.isfinite(J)), J, neutral)
-    r = jnp.max(jnp.abs(r))
     # A branch point exists only in a mirror-symmetric scene; its derivative is that of
     # the symmetric family, taken through the scene's mirror-symmetric part
-    sc_d = scene
+    scene_d = scene
     if symmetric:
-        sc_d = jax.tree.map(lambda p, q: jnp.where(bp, q, p) if eqx.is_inexact_array(q) else p, scene,
-                            mirror_symmetric_part(scene))
-    z = jnp.where(finite, _implicit_step(res, sg(z_use), J, sc_d, solve), z)
-    t, m, a, vt, vm = _fold_unpack(expand(z), N)
-    result = RESULTS.where(done & finite, RESULTS.successful,
-                           RESULTS.where(finite, RESULTS.max_steps_reached, RESULTS.nonfinite))
-    nv = jnp.sqrt(jnp.sum(w * vt**2))
-    sc = parameter.set(scene, a)
-    fh = positions(t, m, sc)[N // 2, 1]
+        scene_d = jax.tree.map(lambda p, q: jnp.where(bp, q, p) if eqx.is_inexact_array(q) else p, scene,
+                               mirror_symmetric_part(scene))
+    res_sg = lambda z: res(z, scene_sg)  # noqa: E731
+    return SimpleNamespace(N=N, kind=kind, z0=z0, w=w, scene=scene, scene_d=scene_d, parameter=parameter, res=res,
+                           res_sg=res_sg, expand=expand, jac=_jacobian_fn(res_sg, scene_sg, N, "fold"),
+                           solve=_solver_fn(scene_sg, N, "fold"),
+                           neutral=_neutral_jacobian(z0.shape[0], N, "fold", dtype))
+
+
+def _critical_point(p, z, residual, num_steps, result):
+    t, m, a, vt, vm = _fold_unpack(p.expand(z), p.N)
+    nv = jnp.sqrt(jnp.sum(p.w * vt**2))
+    sc = p.parameter.set(p.scene, a)
+    fh = positions(t, m, sc)[p.N // 2, 1]
     return CriticalPoint(alpha=a, theta=t, force=m, mode=vt / nv, mode_force=vm / nv, fold_height=fh,
-                         kind=kind.astype(jnp.int32), residual=r, num_steps=k, result=result)
+                         kind=p.kind.astype(jnp.int32), residual=residual, num_steps=num_steps, result=result)
+
+
+LOCATED_TOL = 1e-8
+"""Largest max-norm residual of the extended system (`jaxrod.critical_point`) at which
+[`located_critical_point`][] accepts a located critical point."""
+
+
+def located_critical_point(scene, theta, force, alpha, mode, kind, *,
+                           parameter: AbstractParameter = SymmetricAlpha()) -> CriticalPoint:
+    r"""A critical point already located to round-off (the interpolated bisection of
+    [`jaxrod.snap_angles`][]) as a [`jaxrod.CriticalPoint`][] of the extended system of
+    [`critical_point`][], with its implicit derivative, without Newton's method: `result`
+    is `successful` where the system's residual there (`residual`) is at most `LOCATED_TOL`
+    (a branch point's state is projected onto the mirror-symmetric states first),
+    `nonfinite` where it is not finite, `derivative_unavailable` otherwise.
+
+    The values are the located point's; their derivative with respect to the float leaves
+    of `scene` is the implicit-function derivative $-J^{-1}\partial_pR$ of the extended
+    system at that point, whose Jacobian $J$ is assembled only where a derivative is taken
+    (inside the derivative rule): a program that only evaluates carries the residual alone."""
+    p = _problem(scene, theta, force, alpha, mode, kind, parameter)
+    r = jnp.max(jnp.abs(p.res_sg(p.z0)))
+    z = _implicit_root(p.res, lax.stop_gradient(p.z0), p.scene_d, p.N, p.solve, p.neutral)
+    result = RESULTS.where(r <= LOCATED_TOL, RESULTS.successful,
+                           RESULTS.where(jnp.isfinite(r), RESULTS.derivative_unavailable, RESULTS.nonfinite))
+    return _critical_point(p, z, r, jnp.zeros((), jnp.int32), result)
 
 
 def mirror_symmetric_part(scene):

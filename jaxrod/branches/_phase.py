@@ -8,13 +8,11 @@ started at the previous gap's states, accepted when the result is the same state
 (converged, stable, fold height of the same sign, no angle changed by $\pi/2$ or more);
 otherwise (the first gap, a state that stops existing) from the homotopy of
 [`jaxrod.initial_state`][], as `snap_angles` builds them. `warm_starts` (0, 1 or 2) records
-which. Then `snap_angles` runs from those states without its extended-system polish and
-without following the landed branch after a snap (`continue_after_snap=False`):
-$\alpha_c$ is the bisection value, within ~1e-8 rad of the polished one. Homotopy (51 ms
-of 93 ms per scene at N = 100) and polish (31 ms) were the cost; on the 5 x 41 grid at
-N = 100 this takes ~3 s instead of ~16 s, with the same kinds, start codes and landing
-states at all 205 points and $|\Delta\alpha_c|\le6\times10^{-7}$ deg (measured against
-single polished `snap_angles` calls; `tests/test_phase_diagram.py` checks a small grid).
+which. Then `snap_angles` runs from those states without its polish (no derivative) and
+without following the landed branch after a snap (`continue_after_snap=False`), with
+the same $\alpha_c$. Homotopy (51 ms of 93 ms per scene at N = 100) was most of the cost
+of single calls; `tests/test_phase_diagram.py` checks a small grid against single
+`snap_angles` calls (the same kinds, start codes and landing states).
 $\Psi_0$ and the gaps are traced, so every chunk reuses one compilation (per mesh and grid
 length). Each gap keeps its own result code: a gap where a state does not exist gives
 NaN angles there and does not affect the others.
@@ -118,7 +116,7 @@ def _kw(layout):
 def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), contact=None, layout=()):
     """All gaps at one fold angle (rad), one gap after the other (`lax.scan`): the start
     states of each gap by Newton from the previous gap's (homotopy where that fails), then
-    `snap_angles` from them without the extended-system polish (bisection values) and
+    `snap_angles` from them without the polish (no derivative) and
     without following the landed branch. `keep_branch` (static) also returns each path's
     walked branch (`branch_up`, `branch_down`: the first continuation stage, a `Branch`
     per gap) for the tests that check the walks themselves. `contact`: a

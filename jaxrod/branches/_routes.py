@@ -18,14 +18,13 @@ route (`alpha_c2` NaN, `kind2` none).
 **How.** The branch stage that decided the path ends on its first computed point past
 $\alpha_c$ (unstable count $\nu_a+1$). Continuation from that point in the same direction
 stops at the next change of $\nu$ (or at $|\alpha|=$`bound`: no second point); bisection
-on arclength between the last two points, as for $\alpha_c$; then Newton on the extended
-system ([`jaxrod.critical_point`][]), accepted within $10^{-6}$ rad of the bisection
-point. Kind: a fold where the tangent's $\alpha$ component changes sign between the two
-bracketing points, else a branch point. Its mode is the eigenvector of the eigenvalue
-nearest zero at the bisection's state just past the point (the one crossing zero, by
-inverse iteration as for $\alpha_c$; the lower ones are already negative). `alpha_c2` is
-differentiable in the scene's float leaves (implicit function theorem) where the
-refinement is accepted.
+on arclength between the last two points and interpolation of the eigenvalue that
+crosses zero, as for $\alpha_c$; then the extended system's residual check and implicit
+derivative ([`jaxrod.branches.located_critical_point`][]). Kind: a fold where the tangent's
+$\alpha$ component changes sign between the two bracketing points, else a branch point.
+Its mode is the eigenvector of the crossing eigenvalue (the one nearest zero next to the
+point; the lower ones are already negative). `alpha_c2` is differentiable in the scene's
+float leaves (implicit function theorem) where the check passes.
 """
 
 from __future__ import annotations
@@ -40,7 +39,7 @@ from ..results import RESULTS
 from ..statics import Equilibrium, float_scene, mode_parity
 from .._misc import check_int, check_number, run_if, jit
 from ._continuation import Continuation, SymmetricAlpha, continue_branch, require_float64
-from ._critical import critical_point
+from ._critical import located_critical_point
 from ._snap import KIND_BRANCH_POINT, KIND_FOLD, KIND_NONE, SnapAngles, _fh, _is_mirror_symmetric, _refine, snap_angles
 
 
@@ -55,7 +54,8 @@ class Route(eqx.Module):
     NaN without one); `result`: `successful` (a second point found, or shown not to exist
     before the bound), the path's own code where the path is not `successful`,
     `continuation_incomplete` where the search stopped short, `derivative_unavailable`
-    where the extended-system refinement failed (`alpha_c2` is then the bisection value)."""
+    where the located point does not solve the extended system to tolerance (`alpha_c2`
+    then carries no derivative)."""
 
     alpha_c: Array
     kind: Array
@@ -94,7 +94,7 @@ def _second(scene_d, path, direction, settings, bound, bisections, tol):
         b = continue_branch(sc, start, parameter, direction=direction, bounds=(-bound, bound), settings=settings,
                             stop_on_instability=True, check_contact=False)
         # v: the mode whose eigenvalue crosses zero there (the one nearest zero just past it)
-        t, m, lam, v, _ = _refine(scene, parameter, b, settings, tol, bisections)
+        t, m, lam, v = _refine(scene, parameter, b, settings, tol, bisections)
         j = b.count - 1
         fold = jnp.sign(b.tau_lam[j - 1]) != jnp.sign(b.tau_lam[j])
         nu_a = b.num_unstable[j - 1]
@@ -107,11 +107,11 @@ def _second(scene_d, path, direction, settings, bound, bisections, tol):
     stop, nu_a, t, m, lam, v, kind = run_if(search, run, skipped, (br.theta[i], br.force[i], br.lam[i]))
     found = search & (stop == 2) & (nu_a <= 2)
     incomplete = search & ((stop == 0) | (stop == 3) | ((stop == 2) & (nu_a > 2)))
-    # the differentiable refinement (the scene with its gradients, the state without)
+    # the located point as a root of the extended system: the derivative (the scene with its
+    # gradients, the state without)
     a0 = jnp.where(found, lam, 0.0)
-    cp = critical_point(scene_d, t, m, a0, v, jnp.where(found, kind, KIND_FOLD), parameter=parameter)
-    sg = lax.stop_gradient
-    ok = found & (cp.result == RESULTS.successful) & (jnp.abs(sg(cp.alpha) - a0) < 1e-6)
+    cp = located_critical_point(scene_d, t, m, a0, v, jnp.where(found, kind, KIND_FOLD), parameter=parameter)
+    ok = found & (cp.result == RESULTS.successful)
     alpha2 = jnp.where(ok, cp.alpha, jnp.where(found, lam, nan))
     theta2 = jnp.where(ok, cp.theta, jnp.where(found, t, nan))
     force2 = jnp.where(ok, cp.force, jnp.where(found, m, nan))

@@ -11,13 +11,17 @@ landing close by means a supercritical branch is followed (see `follow_path`). T
 and landed states and every computed point of the path's stages are checked for
 self-intersection (`jaxrod.self_intersects`).
 
-The critical point between the last stable and the first unstable point is refined by
+The critical point between the last stable and the first unstable point is located by
 bisection on the arclength along the stable point's tangent (each trial is a corrector
-solve plus one Sturm count), to $\Delta s\sim 2^{-24}$ of the step ($\lesssim 10^{-8}$ in $\alpha$),
-then polished by Newton on the extended system (`jaxrod.critical_point`), which is accepted
-only within $10^{-6}$ rad of the bisection point, so $\alpha_c$ is exact to round-off at the given
-mesh. (48 bisections gave the same $\alpha_c$ to 1e-10 deg at 3x the cost; 16 left the
-bisection point up to 3e-6 rad away, outside the acceptance.) Its kind: under symmetric actuation, a *branch point* if
+solve, finished by one Newton step past its tolerance, plus one Sturm count), to a bracket
+$\Delta s\sim 2^{-24}$ of the step wide, then by linear interpolation of the eigenvalue that
+crosses zero ($\mathsf K$'s eigenvalue nearest zero at both ends of the bracket,
+`jaxrod.linalg.kkt.critical_pair`): the state, the angle and the mode at its zero are off by
+the bracket's square, so $\alpha_c$ is exact to round-off at the given mesh (the root of the
+extended system, `jaxrod.critical_point`, to 1e-13 rad). On the mirror-symmetric branch the
+bracket's states are kept mirror-symmetric. The polish
+(`jaxrod.branches.located_critical_point`) checks that residual of the extended system and
+attaches its implicit derivative. Its kind: under symmetric actuation, a *branch point* if
 the mode that goes unstable is mirror-asymmetric, a *fold* (limit point in $\alpha$) if it
 is symmetric; under one-sided actuation, a fold.
 """
@@ -31,9 +35,9 @@ from jax import lax
 from jaxtyping import Array
 
 from ..linalg import kkt
-from ._continuation import (Continuation, SymmetricAlpha, _pieces, _tangent, continue_branch, require_float64, corrector)
+from ._continuation import Continuation, SymmetricAlpha, _pieces, continue_branch, require_float64, corrector
 from ..energy.contact import contact_energy, self_intersects, step_bound
-from ._critical import critical_point
+from ._critical import located_critical_point
 from ..energy.geometry import discretize
 from ..energy.lagrangian import positions
 from ..statics import Newton, float_scene, solve_unflagged
@@ -57,10 +61,9 @@ class SnapPath(eqx.Module):
     `branch` the continuation stages (leading axis: stage; a supercritical branch point
     is followed by a second stage on the asymmetric branch, a snap by one on the landed
     branch unless `continue_after_snap=False`), `result` and `start_result` (below),
-    `stop` (the deciding `Branch.stop`), `refine_result` (the RESULTS code of the extended-system refinement of the
-    critical point, `jaxrod.critical_point`; where it fails the bisection values are kept),
-    `mode` the critical mode (angle part, unit $L^2$ norm: the refinement's, or where that is
-    off or fails the bisection's, at the state just past the critical point), `jump` the $L^2$ distance of the
+    `stop` (the deciding `Branch.stop`), `refine_result` (the RESULTS code of the polish: whether the located critical
+    point solves the extended system, `jaxrod.branches.located_critical_point`),
+    `mode` the critical mode (angle part, unit $L^2$ norm, at the located critical point), `jump` the $L^2$ distance of the
     landed angle field from the critical one (rad; NaN if it does not snap), `stage` the
     index of the `branch` stage that decided the path (holds the critical point; the stages
     before it were supercritical branch points or contact clicks), `clicks` the number of
@@ -70,7 +73,8 @@ class SnapPath(eqx.Module):
     not exist, `continuation_incomplete`, `landing_failed`, `self_intersecting` (the
     critical or the landed state, or a computed point of a stage up to the deciding one,
     passes through itself; `branch.crossing` marks the points), `derivative_unavailable` (the
-    refinement failed: `alpha_c` is the bisection value). `start_result` is
+    located point does not solve the extended system to tolerance: `alpha_c` carries no
+    derivative). `start_result` is
     `start_substituted` where the path started from the other path's end (see the module
     docstring).
 
@@ -125,6 +129,15 @@ def _refine(scene, parameter, branch, settings, tol, bisections):
     sgn = jnp.where(sgn == 0, 1.0, sgn)
     tau = jax.tree.map(lambda v: sgn * v, tau)
     ds_b = branch.ds[i]
+    # a bracket on the mirror-symmetric branch under symmetric actuation (where a branch point
+    # lies) keeps its states mirror-symmetric: next to the branch point the corrector's solves
+    # amplify the asymmetric round-off by 1/|eigenvalue| (to ~1e-6 rad at N = 60), which would
+    # hide that the state is symmetric
+    sym = isinstance(parameter, SymmetricAlpha) & _is_mirror_symmetric(ta, scene)
+    flip = jnp.array([1.0, -1.0], ta.dtype)
+
+    def symmetric(t, m):
+        return jnp.where(sym, 0.5 * (t - t[::-1]), t), jnp.where(sym, 0.5 * (m + flip * m), m)
 
     # `bisections` halvings, then one more pass that corrects at `hi`, the state just past
     # the critical point (whose critical mode tells the kind): one corrector call site. Each
@@ -137,7 +150,8 @@ def _refine(scene, parameter, branch, settings, tol, bisections):
         s = jnp.where(last, hi, 0.5 * (lo + hi))
         guess = tuple(b + (s - lo) * d for b, d in zip(best, tau))
         t, m, lam, conv, _ = corrector(scene, parameter, (ta, ma), la, tau, s, settings.steps_for(scene), tol,
-                                       guess)
+                                       guess, finish=True)
+        t, m = symmetric(t, m)
         nu = kkt.count_below(Kf(t, m, lam), jnp.zeros(1, t.dtype))[0]
         stable_side = conv & (nu == nu_a) & ~last
         lo = jnp.where(stable_side, s, lo)
@@ -147,12 +161,19 @@ def _refine(scene, parameter, branch, settings, tol, bisections):
         return lo, hi, best, after
 
     start = (ta, ma, la)
-    lo, hi, (t, m, lam), (t2, m2, l2) = lax.fori_loop(0, bisections + 1, body,
-                                                      (jnp.zeros_like(ds_b), ds_b, start, start))
-    K2 = Kf(t2, m2, l2)
-    v = kkt.critical_mode(K2)
-    tl_c = _tangent(Kf(t, m, lam), F_lam(t, m, lam), w * tau[0], tau[2], w)[2]
-    return t, m, lam, v, tl_c
+    _, _, best, after = lax.fori_loop(0, bisections + 1, body, (jnp.zeros_like(ds_b), ds_b, start, start))
+    # the eigenvalue that crosses zero, on both sides of the bracket (one program for both)
+    V, mu = lax.map(lambda x: kkt.critical_pair(Kf(*x)), jax.tree.map(lambda a, b: jnp.stack([a, b]), best, after))
+    v_lo, v_hi = V[0], V[1] * jnp.where(jnp.dot(V[0], V[1]) < 0, -1.0, 1.0)
+    # linear interpolation to its zero: the bracket is ~2^-bisections of a step wide, so the
+    # interpolated state and angle are off by its square (round-off). Where the two values do
+    # not straddle zero (a side that did not converge), the last stable state and the mode
+    # past the point are kept
+    crossed = (mu[0] * mu[1] < 0) & jnp.all(jnp.isfinite(V)) & jnp.all(jnp.isfinite(after[0]))
+    f = jnp.where(crossed, mu[0] / jnp.where(crossed, mu[0] - mu[1], 1.0), 0.0)
+    t, m, lam = jax.tree.map(lambda a, b: jnp.where(crossed, a + f * (b - a), a), best, after)
+    v = jnp.where(crossed, v_lo + f * (v_hi - v_lo), v_hi)
+    return t, m, lam, v / jnp.linalg.norm(v)
 
 
 def _land(scene, parameter, t, m, lam, v, direction, up_expected, solver):
@@ -195,7 +216,7 @@ def _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bise
     branch = continue_branch(sc, start, parameter, direction=direction, bounds=(-bound, bound),
                              settings=settings, stop_on_instability=True, check_contact=True)
     snaps = (branch.stop == 2) & ok0
-    t, m, lam, v, _ = _refine(scene, parameter, branch, settings, tol, bisections)
+    t, m, lam, v = _refine(scene, parameter, branch, settings, tol, bisections)
     if isinstance(parameter, SymmetricAlpha):
         asym = (mode_parity(v[:, None])[0] < 0) & _is_mirror_symmetric(t, scene)
         kind = jnp.where(asym, KIND_BRANCH_POINT, KIND_FOLD)
@@ -347,11 +368,10 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     reaches $|\alpha|=$`bound` without losing stability does not snap (`snaps=False`,
     `alpha_c=NaN`, kind "none").
 
-    `polish=False` skips the extended-system Newton refinement (`jaxrod.critical_point`):
-    $\alpha_c$ is then the bisection value, within ~1e-8 rad of the polished one at
-    `bisections=24`, and carries no gradient (`refine_result` is `None`; `mode` is the
-    bisection's).
-    Used by [`jaxrod.phase_diagram`][], where the refinement was a third of the cost.
+    `polish=False` skips the polish (the extended system's residual and implicit
+    derivative, `jaxrod.branches.located_critical_point`): the same $\alpha_c$, without a
+    gradient (`refine_result` is `None`; a branch point's critical state is not projected
+    onto the mirror-symmetric states, ~1e-7 rad). Used by [`jaxrod.phase_diagram`][].
     `continue_after_snap=False` does not follow the landed branch after a snap (the second
     `branch` stage is then empty, `count` 0); the critical angles are the same.
 
@@ -432,20 +452,18 @@ def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, cont
 
 
 def _polish(scene_d, path, parameter):
-    """Refine the bisection result on the extended system (`jaxrod.critical_point`): the
-    differentiable alpha_c and critical state. Kept from bisection where it fails."""
-    sg = lax.stop_gradient
+    """The located critical point as a root of the extended system
+    (`jaxrod.branches.located_critical_point`): the differentiable alpha_c and critical state
+    (a branch point's projected onto the mirror-symmetric states). Where its residual is too
+    large the path keeps its values, which carry no derivative, and says so."""
     a0 = jnp.where(path.snaps, path.alpha_c, 0.0)
-    v = path.mode  # the bisection's, just past the critical point
     kind = jnp.where(path.kind == KIND_NONE, KIND_FOLD, path.kind)
-    cp = critical_point(scene_d, path.theta_before, path.force_before, a0, v, kind, parameter=parameter)
-    # accept only a converged refinement that stays at the bisection point (1e-6 rad)
-    ok = path.snaps & (cp.result == RESULTS.successful) & (jnp.abs(sg(cp.alpha) - a0) < 1e-6)
+    cp = located_critical_point(scene_d, path.theta_before, path.force_before, a0, path.mode, kind,
+                                parameter=parameter)
+    ok = path.snaps & (cp.result == RESULTS.successful)
     pick = lambda new, old: jnp.where(ok, new, old)  # noqa: E731
     refine_result = RESULTS.where(path.snaps, cp.result, RESULTS.successful)
-    refine_result = RESULTS.where(ok | ~path.snaps, refine_result, RESULTS.where(
-        cp.result == RESULTS.successful, RESULTS.max_steps_reached, cp.result))
-    # a failed refinement leaves the bisection value, which carries no derivative: say so
+    # a point that does not solve the extended system carries no derivative: say so
     result = RESULTS.where((path.result == RESULTS.successful) & path.snaps & ~ok,
                            RESULTS.derivative_unavailable, path.result)
     return eqx.tree_at(
@@ -453,6 +471,6 @@ def _polish(scene_d, path, parameter):
                    p.result),
         path,
         (pick(cp.alpha, path.alpha_c), pick(cp.theta, path.theta_before), pick(cp.force, path.force_before),
-         pick(cp.fold_height, path.fold_height_before), refine_result, jnp.where(ok, cp.mode, v), result),
+         pick(cp.fold_height, path.fold_height_before), refine_result, pick(cp.mode, path.mode), result),
         is_leaf=lambda x: x is None,
     )
