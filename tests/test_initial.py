@@ -26,9 +26,32 @@ def test_state_only_the_last_path_reaches():
     assert eq.result == jr.RESULTS.successful
     assert bool(eq.stable) and float(jr.fold_height(eq)) < 0
     # and the same state as the third path tried alone: the two lost paths leave no trace
-    eq3, found = _initial._homotopy(_initial.float_scene(sc), -1.0, 24, Newton(), kinds=(2,))
+    eq3, found, _ = _initial._homotopy(_initial.float_scene(sc), -1.0, 24, Newton(), kinds=(2,))
     assert bool(found)
     np.testing.assert_allclose(eq.theta, eq3.theta, atol=1e-10)
+
+
+def test_warm_start_kept_or_replaced_by_the_homotopy():
+    """`initial_state_signed(..., warm=(theta, force, ok))` (the phase diagram's start states):
+    from the state of a neighbouring gap (0.50 -> 0.52) Newton keeps the tracked state
+    (`warmed`), the same state as the homotopy's to 1e-10; from a state of the other sign,
+    or with `ok` False, the homotopy runs and gives its own state; the down state of
+    (30 deg, 0.8), which does not exist, is `state_not_found` whatever the warm start."""
+    sc = jr.make_scene(60.0, 0.52, n=30)
+    prev = jr.initial_state(jr.make_scene(60.0, 0.5, n=30), "up")
+    ref = jr.initial_state(sc, "up")
+    f = jax.jit(lambda sc, sgn, t, m, ok: _initial.initial_state_signed(sc, sgn, warm=(t, m, ok)))
+    eq, warmed = f(sc, 1.0, prev.theta, prev.force, True)
+    assert bool(warmed) and eq.result == jr.RESULTS.successful
+    np.testing.assert_allclose(eq.theta, ref.theta, atol=1e-10)
+    other = jr.initial_state(sc, "down")
+    for t, m, ok in ((other.theta, other.force, True), (prev.theta, prev.force, False)):
+        eq, warmed = f(sc, 1.0, t, m, ok)
+        assert not bool(warmed) and eq.result == jr.RESULTS.successful
+        np.testing.assert_allclose(eq.theta, ref.theta, atol=1e-10)
+    gone = jr.make_scene(30.0, 0.8, n=30)
+    eq, warmed = f(gone, -1.0, prev.theta, prev.force, True)
+    assert not bool(warmed) and eq.result == jr.RESULTS.state_not_found
 
 
 def test_no_path_gives_state_not_found():

@@ -234,7 +234,7 @@ def _residual_norm(g, scene):
                        jnp.max(jnp.abs(g[1])) / st.length)
 
 
-def corrector(scene, parameter, x0, lam0, tau, ds, steps, tol, guess=None, finish=False):
+def corrector(scene, parameter, x0, lam0, tau, ds, steps, tol, guess=None, finish=False, with_jacobian=False):
     """Predict by `ds` along `tau` from (x0, lam0) and correct. Returns
     (theta, mu, lam, converged, iterations); `converged` is False also where the corrected
     point lies farther than |ds| from the prediction (in the arclength norm): a jump to
@@ -242,7 +242,10 @@ def corrector(scene, parameter, x0, lam0, tau, ds, steps, tol, guess=None, finis
     (the same equations, the hyperplane `ds` from (x0, lam0) along `tau`). `finish`
     (static): take one more Newton step once the residual is below `tol`, which leaves the
     point at round-off instead of up to `tol` off (the critical-point bracket of
-    `jaxrod.snap_angles` interpolates between two such points)."""
+    `jaxrod.snap_angles` interpolates between two such points). `with_jacobian` (static):
+    also return `(K, F_lam)` of the last evaluation, which without `finish` is at the
+    returned point when it converged (the continuation's next tangent and Sturm count use
+    them instead of assembling them again)."""
     F, F_lam, Kf = _pieces(scene, parameter)
     d = discretize(scene)
     w = d.h
@@ -252,31 +255,36 @@ def corrector(scene, parameter, x0, lam0, tau, ds, steps, tol, guess=None, finis
     c = w * tt
 
     def body(carry):
-        t, m, lam, k, _, _ = carry
+        t, m, lam, k, _, _, _ = carry
         g = F(t, m, lam)
         rs = jnp.dot(c, t - tp) + tl * (lam - lp)
         Kmat = Kf(t, m, lam)
-        dt, dm, dl = _bordered_solve(Kmat, F_lam(t, m, lam), c, tl, -g[0], -g[1], -rs)
+        Flam = F_lam(t, m, lam)
+        dt, dm, dl = _bordered_solve(Kmat, Flam, c, tl, -g[0], -g[1], -rs)
         res = _residual_norm(g, scene)
         conv = (res <= tol) & (jnp.abs(rs) <= tol)
         step = ~conv | finish
         t = jnp.where(step, t + dt, t)
         m = jnp.where(step, m + dm, m)
         lam = jnp.where(step, lam + dl, lam)
-        return t, m, lam, k + 1, conv, conv & finish
+        return t, m, lam, k + 1, conv, conv & finish, (Kmat, Flam)
 
     def cond(carry):
-        t, m, lam, k, conv, finished = carry
+        t, m, lam, k, conv, finished, _ = carry
         finite = jnp.all(jnp.isfinite(t)) & jnp.isfinite(lam)
         return ~(conv & (finished | (not finish))) & (k < steps) & finite
 
     start = (tp, mp, lp) if guess is None else guess
     false = jnp.zeros((), bool)
-    t, m, lam, k, conv, _ = lax.while_loop(cond, body, (*start, jnp.zeros((), jnp.int32), false, false))
+    jac0 = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype),
+                        jax.eval_shape(lambda: (Kf(*start), F_lam(*start))))
+    t, m, lam, k, conv, _, jac = lax.while_loop(cond, body, (*start, jnp.zeros((), jnp.int32), false, false, jac0))
     # a correction longer than the step itself left the branch for another one (at Psi0 =
     # 60 deg, G/L = 0.075 with contact, a step of 0.025 landed 0.42 away, on an unstable
     # branch 18 deg back): not converged, so the step is halved
     far = jnp.sqrt(jnp.sum(w * (t - tp) ** 2) + (lam - lp) ** 2) > jnp.abs(ds)
+    if with_jacobian:
+        return t, m, lam, conv & ~far, k, jac
     return t, m, lam, conv & ~far, k
 
 
@@ -367,13 +375,14 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
 
     def body(c):
         t, m, lam, tau, ds = c["t"], c["m"], c["lam"], c["tau"], c["ds"]
-        tn, mn, ln, conv, k = corrector(scene, parameter, (t, m), lam, tau, ds, settings.steps_for(scene), tol)
+        tn, mn, ln, conv, k, (Kn, Flam_n) = corrector(scene, parameter, (t, m), lam, tau, ds,
+                                                     settings.steps_for(scene), tol, with_jacobian=True)
         if scene.contact is not None:
             # with self-contact a step must not carry the strip through itself (a penalty
             # cannot undo a crossing): such a point is rejected and the step halved
             conv = conv & ~self_intersects(tn, parameter.set(scene, ln), force=mn)
-        Kn = Kf(tn, mn, ln)
-        nt, nm, nl = _tangent(Kn, F_lam(tn, mn, ln), w * tau[0], tau[2], w)
+        # K and F_lam at the corrected point: the corrector's last evaluation, where it converged
+        nt, nm, nl = _tangent(Kn, Flam_n, w * tau[0], tau[2], w)
         nu = kkt.count_below(Kn, jnp.zeros(1, dtype))[0]
         i = c["i"]
         b = c["buf"]

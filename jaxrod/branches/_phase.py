@@ -21,13 +21,13 @@ NaN angles there and does not affect the others.
 grid in a single jitted call, `vmap` over $\Psi_0$ of the same scan over the gaps (same
 warm starts, same per-gap result codes). Batched, each loop runs as long as its slowest
 member and does every member's work, and an `lax.cond` on a batched predicate would run
-both branches. So the warm-start Newton, the Newton's inertia-correction ladder and the
-later stages of a snap path are loops of at most one pass (`jaxrod._misc.run_if`), which
-under `vmap` run only when some member needs them, with their inputs passed through an
-optimization barrier (without it XLA hoisted the work out of the loop and ran it every
-time); the homotopy fallback, which at a given gap one member of the grid needs (the one
-whose state stopped existing), runs member by member through real conds
-(`jaxrod._misc.run_if_each`). On XLA:CPU the batched linear algebra goes through
+both branches. So the Newton's inertia-correction ladder and the later stages of a snap
+path are loops of at most one pass (`jaxrod._misc.run_if`), which under `vmap` run only when
+some member needs them, with their inputs passed through an optimization barrier (without
+it XLA hoisted the work out of the loop and ran it every time). The warm start and the
+homotopy that replaces it where it fails are one loop with one Newton solve
+(`initial_state_signed(..., warm=...)`): batched, a member whose warm start held waits
+while another member runs its homotopy. On XLA:CPU the batched linear algebra goes through
 `jaxrod.linalg.batched` (batched LAPACK calls inside the loops had deadlocked 2-core machines).
 Measured on 2 CPU cores (`benchmarks/bench_phase.py`, both side by side, 5 x 41 at
 N = 100): the vmapped call 5.39 s, the sequential chunks 4.45 s (it was 21.8 s vs 4.77 s
@@ -56,9 +56,9 @@ import numpy as np
 from jax import lax
 
 from ._continuation import Continuation, SymmetricAlpha
-from ..statics import float_scene, solve_equilibrium
-from ..statics import initial_state_signed, still_tracked
-from .._misc import check_grid, package_version, run_if as _run_if, run_if_each, jit
+from ..statics import float_scene
+from ..statics import initial_state_signed
+from .._misc import check_grid, package_version, jit
 from ..model import Clamps, Contact, crease_layout, layout_strip, Mesh, Scene
 from ._snap import _snap_angles_from
 from ..results import RESULTS
@@ -72,26 +72,11 @@ VARIABLES = ("alpha_c_up", "alpha_c_down", "kind_up", "kind_down", "fold_height_
 def _warm_or_homotopy(scene, sgn, t_prev, m_prev, ok_prev):
     """The up (`sgn` = +1) or down (-1) state of `scene` at alpha = 0: Newton from the
     neighbouring gap's state when that exists and the result is the same state (converged,
-    stable, fold height of the right sign, no angle changed by pi/2 or more), else the
-    homotopy of `jaxrod.initial_state` (a real branch: the chunk is not vmapped).
-    Returns the equilibrium and whether the warm start was used."""
-    is_sds = lambda x: isinstance(x, jax.ShapeDtypeStruct)  # noqa: E731
-    shapes = eqx.filter_eval_shape(initial_state_signed, scene, sgn)
-    static = eqx.filter(shapes, is_sds, inverse=True)
-    shapes = eqx.filter(shapes, is_sds)
-    arrays = lambda e: eqx.filter(e, eqx.is_array)  # noqa: E731
-    zeros = lambda: jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)  # noqa: E731
-
-    def warm(scene, sgn, t_prev, m_prev):
-        eq = solve_equilibrium(scene, t_prev, m_prev)
-        return still_tracked(eq, sgn, t_prev, scene), jax.tree.map(lambda x, s: jnp.asarray(x, s.dtype), arrays(eq), shapes)
-
-    # (everything the two branches use goes in as `run_if` operands: see its docstring)
-    good, eq_w = _run_if(ok_prev, warm, (jnp.zeros((), bool), zeros()), (scene, sgn, t_prev, m_prev))
-    # the homotopy (~35 ms a state at N = 100) one member after another under `vmap`: at most
-    # a few members of the vmapped grid need it at a gap (the one whose state stopped existing)
-    eq = run_if_each(~good, lambda sc, sg: arrays(initial_state_signed(sc, sg)), eq_w, (scene, sgn))
-    return eqx.combine(eq, static), good
+    stable, fold height of the right sign, no angle changed by pi/2 or more, not passing
+    through itself), else the homotopy of `jaxrod.initial_state`: one loop, one compiled
+    Newton solve for both (`initial_state_signed(..., warm=...)`). Returns the equilibrium
+    and whether the warm start was used."""
+    return initial_state_signed(scene, sgn, warm=(t_prev, m_prev, ok_prev))
 
 
 def _contact(key):

@@ -101,10 +101,6 @@ def _newton(scene, theta0, mu0, solver: Newton):
     def L(t, m):
         return lagrangian(t, m, scene, d)
 
-    def penalty(t, m):
-        gm = lagrangian_gradient(t, m, scene, d)[1]
-        return 0.5 * jnp.sum(gm**2)
-
     def cond(c):
         return ~c["done"]
 
@@ -160,26 +156,32 @@ def _newton(scene, theta0, mu0, solver: Newton):
                 # rho >= 2 max(L', 0) / (-P') + rho_0 makes it <= -|L'| - rho_0 |P'|. Needed
                 # where the force changes a lot while the end condition is nearly met
                 # (the landing after a snap of a shallow arch: |q| ~ 1e2, |c| ~ 1e-3).
-                lag0, slope_l = jax.jvp(L, (t, m), (p, q))
-                pen0, slope_p = jax.jvp(penalty, (t, m), (p, q))
+                # Both slopes come from the gradient and the Hessian at hand:
+                # L' = g . (p, q), P' = g_mu . (K (p, q))_mu.
+                slope_l = jnp.dot(g[0], p) + jnp.dot(g[1], q)
+                slope_p = jnp.dot(g[1], kkt.matvec(K, p, q)[1])
                 need = 2.0 * jnp.maximum(slope_l, 0.0) / jnp.maximum(-slope_p, jnp.finfo(dtype).tiny) + rho
                 rho_it = jnp.where(slope_p < 0.0, jnp.maximum(rho, need), rho)
                 rho_it = jnp.where(jnp.isfinite(rho_it), rho_it, rho)
-                f0 = lag0 + rho_it * pen0
+                f0 = L(t, m) + rho_it * 0.5 * jnp.sum(g[1] ** 2)
                 slope = jnp.minimum(slope_l + rho_it * slope_p, 0.0)
 
                 def accept(step):
-                    f = L(t + step * p, m + step * q) + rho_it * penalty(t + step * p, m + step * q)
-                    armijo = f <= f0 + 1e-4 * step * slope
-                    return jnp.isfinite(f) & armijo
+                    # Armijo on the merit; the full step is also taken where it halves the
+                    # residual, descent or not (one gradient serves both tests)
+                    ts, ms = t + step * p, m + step * q
+                    gs = grad_fn(ts, ms)
+                    f = L(ts, ms) + rho_it * 0.5 * jnp.sum(gs[1] ** 2)
+                    armijo = jnp.isfinite(f) & (f <= f0 + 1e-4 * step * slope)
+                    res_s = _residual(gs, scene)
+                    halves = (step == 1.0) & (res_s <= 0.5 * res) & jnp.isfinite(res_s)
+                    return armijo | halves
 
-                full_res = _residual(grad_fn(t + p, m + q), scene)
-                full_ok = (full_res <= 0.5 * res) & jnp.isfinite(full_res)
-
-                # The Armijo test is carried as a flag, never re-evaluated in `ls_cond`: under
-                # `vmap` the loop condition is recomputed inside the body, and a differently
-                # fused copy of `merit` can round the other way when f == f0 (a converged
-                # iterate), so the loop would run forever without updating that member.
+                # The test is carried as a flag, never re-evaluated in `ls_cond`: under `vmap`
+                # the loop condition is recomputed inside the body, and a differently fused
+                # copy of the merit can round the other way when f == f0 (a converged
+                # iterate), so the loop would run forever without updating that member. The
+                # first pass tries the full step: one call site of the trial
                 def ls_cond(s):
                     step, k, ok = s
                     return (~ok) & (k < solver.max_backtracks)
@@ -188,13 +190,9 @@ def _newton(scene, theta0, mu0, solver: Newton):
                     step, k, _ = s
                     return 0.5 * step, k + 1, accept(0.5 * step)
 
-                one = jnp.ones((), dtype)
-                step, k, _ = lax.cond(
-                    full_ok,
-                    lambda: (one, jnp.zeros((), jnp.int32), jnp.ones((), bool)),
-                    lambda: lax.while_loop(ls_cond, ls_body, (one, jnp.zeros((), jnp.int32), accept(one))),
-                )
-                ls_failed = (k >= solver.max_backtracks) & ~full_ok
+                step, _, ok = lax.while_loop(ls_cond, ls_body, (jnp.full((), 2.0, dtype), jnp.full((), -1, jnp.int32),
+                                                                jnp.zeros((), bool)))
+                ls_failed = ~ok
                 t_new, m_upd = t + step * p, m + step * q
             else:
                 ls_failed = jnp.zeros((), bool)

@@ -141,28 +141,33 @@ def initial_state(scene, state: str = "up", *, steps: int = 24, solver: Newton =
     return flag_contact(initial_state_signed(scene, 1.0 if state == "up" else -1.0, steps=steps, solver=solver))
 
 
-_FLAT, _PATH, _FINAL, _DONE = 0, 1, 2, 3
+_FLAT, _PATH, _FINAL, _DONE, _WARM = 0, 1, 2, 3, 4
 """Phases of `_homotopy`'s loop: the flat start, a step of a deformation path, the polish on
-the target scene, finished."""
+the target scene, finished, and Newton on the target from a warm start."""
 
 
 def _tree_where(pred, a, b):
     return jax.tree.map(lambda x, y: jnp.where(pred, x, y), a, b)
 
 
-def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2)):
+def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2), warm=None):
     """The homotopy of `initial_state` on the (gradient-free) `target` scene: the flat start,
     then the deformation paths `kinds` (0 all together, 1 crease first, 2 clamps first) in
     turn, each abandoned at its first step that loses the tracked state, then the polish on
     the target from the end of the first valid path (or of the last one tried).
+
+    `warm`: `(theta, force, ok)`, a state of a neighbouring scene (`jaxrod.phase_diagram`'s
+    previous gap) that, where `ok`, is tried first: Newton on the target from it, accepted
+    when it is still the tracked state (`still_tracked`) and does not pass through itself;
+    otherwise the homotopy runs as without it.
 
     Every Newton solve of the homotopy runs at one call site, in one loop whose phase picks
     the scene and the guess: one compiled copy of the Newton solve instead of one per phase
     (a copy is about 220 of the XLA kernels of `snap_angles`, whose compile time follows
     their number).
 
-    Returns `(eq, found)`: the polished equilibrium (scene `target`) and whether a path was
-    valid."""
+    Returns `(eq, found, warmed)`: the polished equilibrium (scene `target`), whether a path
+    (or the warm start) was valid, and whether the warm start was."""
     dtype = scene_dtype(target)
     kinds = jnp.asarray(kinds, jnp.int32)
     zero = jnp.zeros((), dtype)
@@ -178,7 +183,7 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2)):
         u = jnp.where(phase == _FLAT, 0.0, (step + 1).astype(dtype) / steps)
         uc, ua = _path_params(kind, u)
         deformed = eqx.filter(_deformed(_with_gap(target, u), uc, ua), eqx.is_array)
-        return eqx.combine(_tree_where(phase == _FINAL, arrays, deformed), static)
+        return eqx.combine(_tree_where((phase == _FINAL) | (phase == _WARM), arrays, deformed), static)
 
     def body(c):
         phase, k, step, t, m, ok, found, t0, m0, ok0, dt, dm, out = c
@@ -209,6 +214,15 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2)):
                       tracked & last, t0, m0, ok0,
                       jnp.where(tracked, eq.theta - t, no_dt), jnp.where(tracked, eq.force - m, no_dm))
         head = _tree_where(phase == _FLAT, after_flat, after_path)
+        if warm is not None:
+            from ..energy.contact import self_intersects
+
+            # the warm start (from the carried state): kept, or the flat start next
+            warm_ok = still_tracked(eq, sgn, t, sc) & ~self_intersects(eq.theta, sc, force=eq.force)
+            after_warm = (jnp.where(warm_ok, _DONE, _FLAT), k, jnp.zeros_like(step), guess, jnp.zeros_like(m),
+                          jnp.zeros_like(ok), warm_ok, guess, jnp.zeros_like(m), jnp.zeros_like(ok), no_dt, no_dm)
+            head = _tree_where(phase == _WARM, after_warm, head)
+            out = _tree_where((phase == _WARM) & warm_ok, eqx.filter(eq, eqx.is_array), out)
         head = _tree_where(phase == _FINAL, (_DONE,) + c[1:12], head)
         out = _tree_where(phase == _FINAL, eqx.filter(eq, eqx.is_array), out)
         new = head + (out,)
@@ -220,11 +234,16 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2)):
     out0 = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
     i0 = jnp.zeros((), jnp.int32)
     f0 = jnp.zeros((), bool)
-    t_init, m_init = guess, jnp.zeros(2, dtype)
+    t_init, m_init, phase0 = guess, jnp.zeros(2, dtype), i0 + _FLAT
+    if warm is not None:
+        t_w, m_w, ok_w = warm
+        t_init, m_init = jnp.where(ok_w, t_w, t_init), jnp.where(ok_w, m_w, m_init)
+        phase0 = jnp.where(ok_w, _WARM, _FLAT).astype(jnp.int32)
     c = lax.while_loop(lambda c: c[0] != _DONE, body,
-                       (i0 + _FLAT, i0, i0, t_init, m_init, f0, f0, t_init, m_init, f0, jnp.zeros_like(t_init),
+                       (phase0, i0, i0, t_init, m_init, f0, f0, guess, jnp.zeros(2, dtype), f0, jnp.zeros_like(t_init),
                         jnp.zeros_like(m_init), out0))
-    return eqx.combine(c[-1], eq_static), c[6]
+    # a kept warm start ends with `found` and not `ok`; a valid path ends with both
+    return eqx.combine(c[-1], eq_static), c[6], c[6] & ~c[5]
 
 
 def _finite(tree):
@@ -233,9 +252,11 @@ def _finite(tree):
     return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in leaves]))
 
 
-def initial_state_signed(scene, sgn, *, steps: int = 24, solver: Newton = Newton()) -> Equilibrium:
+def initial_state_signed(scene, sgn, *, steps: int = 24, solver: Newton = Newton(), warm=None) -> Equilibrium:
     """`initial_state` with the side as a number, +1 up or -1 down (may be traced, e.g.
-    mapped with `lax.map` to build both states through one traced body)."""
+    mapped with `lax.map` to build both states through one traced body). `warm`:
+    `(theta, force, ok)`, a state of a neighbouring scene tried first (see `_homotopy`);
+    with it the result is `(equilibrium, whether the warm start was kept)`."""
     if not solver.minimize:
         raise ValueError("initial_state needs a minimizing Newton solver (minimize=True)")
     scene = float_scene(scene)
@@ -243,7 +264,7 @@ def initial_state_signed(scene, sgn, *, steps: int = 24, solver: Newton = Newton
     sgn = jnp.asarray(sgn, dtype)
     target = lax.stop_gradient(scene)
 
-    polished, found = _homotopy(target, sgn, steps, solver)
+    polished, found, warmed = _homotopy(target, sgn, steps, solver, warm=warm)
     # the derivatives of the polished state (implicit function theorem, as `solve_equilibrium`)
     t, m = _implicit(polished.theta, polished.force, scene)
     eq = Equilibrium(t, m, polished.result, polished.num_steps, polished.num_unstable, scene)
@@ -252,4 +273,5 @@ def initial_state_signed(scene, sgn, *, steps: int = 24, solver: Newton = Newton
                            RESULTS.where(eq.converged | ~found, RESULTS.state_not_found, eq.result))
     # a NaN or infinite parameter (a bad member of a batch) is a bad input, not a missing state
     result = RESULTS.where(_finite(scene), result, RESULTS.nonfinite)
-    return eqx.tree_at(lambda e: e.result, eq, result)
+    eq = eqx.tree_at(lambda e: e.result, eq, result)
+    return eq if warm is None else (eq, warmed)
