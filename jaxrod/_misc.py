@@ -302,28 +302,6 @@ def run_if(pred, fn, default, operands=()):
     return jax.lax.while_loop(lambda c: c[0], body, init)[1]
 
 
-def run_if_each(pred, fn, default, operands=()):
-    """`fn(*operands)` where `pred`, else `default`, like [`run_if`][], for an expensive `fn`
-    that few members of a batch need: under `vmap` the members run one after another
-    (`lax.map`), each through a real `lax.cond`, so only the members whose `pred` holds pay
-    for `fn` (a batched loop would make every member do the work of the slowest, masked).
-    Unbatched it is a plain `lax.cond`. No derivative rule (used where none is needed)."""
-    arrays, static = eqx.partition(operands, eqx.is_array)
-
-    @jax.custom_batching.custom_vmap
-    def f(pred, default, arrays):
-        return jax.lax.cond(pred, lambda: fn(*eqx.combine(arrays, static)), lambda: default)
-
-    @f.def_vmap
-    def _rule(axis_size, in_batched, pred, default, arrays):
-        args = jax.tree.map(lambda a, b: a if b else jnp.broadcast_to(a, (axis_size,) + jnp.shape(a)),
-                            (pred, default, arrays), tuple(in_batched))
-        out = jax.lax.map(lambda a: f(*a), args)
-        return out, jax.tree.map(lambda _: True, out)
-
-    return f(jnp.asarray(pred, bool), default, arrays)
-
-
 def package_version() -> str:
     """jaxrod's installed version ("0.0.0" when run from a source tree that is not installed)."""
     import importlib.metadata

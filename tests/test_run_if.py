@@ -1,17 +1,16 @@
-"""`jaxrod._misc.run_if` / `run_if_each`: conditional work that stays cheap under `vmap`.
+"""`jaxrod._misc.run_if`: conditional work that stays cheap under `vmap`.
 
 `run_if` is a loop of at most one pass (under `vmap` it runs only when some member needs
 it); its operands pass an optimization barrier so XLA cannot hoist `fn` out of the loop
 (the hoisting made the vmapped phase diagram run the homotopy at every gap; the cost is
-measured in `benchmarks/bench_phase.py`). `run_if_each` runs the members one after another
-under `vmap`, each through a real `lax.cond`, so `fn` runs only for the members that need it."""
+measured in `benchmarks/bench_phase.py`)."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxrod._misc import run_if, run_if_each
+from jaxrod._misc import run_if
 
 jax.config.update("jax_enable_x64", True)
 
@@ -30,7 +29,7 @@ def _expected(pred, x, scale):
     return np.where(pred, np.sin(x) * scale, 0.0), np.where(pred, 7, -1)
 
 
-@pytest.mark.parametrize("runner", [run_if, run_if_each], ids=["run_if", "run_if_each"])
+@pytest.mark.parametrize("runner", [run_if], ids=["run_if"])
 def test_values_unbatched_vmapped_and_nested(runner):
     x = jnp.linspace(0.1, 2.0, 6)
     pred = jnp.array([True, False, True, True, False, False])
@@ -52,24 +51,3 @@ def test_values_unbatched_vmapped_and_nested(runner):
     y, n = _expected(np.asarray(P), np.asarray(X), 3.0)
     np.testing.assert_allclose(np.asarray(out["y"])[..., 0], y, atol=1e-15)
     np.testing.assert_array_equal(np.asarray(out["n"])[..., 0], n)
-
-
-def test_run_if_each_runs_fn_only_for_members_that_need_it():
-    """Under vmap `fn` executes once per member whose predicate holds (counted by a host
-    callback inside `fn`), not for the whole batch."""
-    calls = []
-
-    def fn(x):
-        jax.debug.callback(lambda v: calls.append(float(v)), x)
-        return x * 10.0
-
-    pred = jnp.array([False, True, False, False, True])
-    x = jnp.arange(5.0)
-    out = jax.jit(jax.vmap(lambda p, xi: run_if_each(p, fn, -xi, (xi,))))(pred, x)
-    jax.block_until_ready(out)
-    np.testing.assert_array_equal(np.asarray(out), [-0.0, 10.0, -2.0, -3.0, 40.0])
-    assert sorted(calls) == [1.0, 4.0]
-    calls.clear()
-    out = jax.jit(jax.vmap(lambda p, xi: run_if_each(p, fn, -xi, (xi,))))(jnp.zeros(5, bool), x)
-    jax.block_until_ready(out)
-    assert calls == []  # nobody needs it: fn never runs

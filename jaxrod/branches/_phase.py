@@ -30,10 +30,8 @@ homotopy that replaces it where it fails are one loop with one Newton solve
 while another member runs its homotopy. On XLA:CPU the batched linear algebra goes through
 `jaxrod.linalg.batched` (batched LAPACK calls inside the loops had deadlocked 2-core machines).
 Measured on 2 CPU cores (`benchmarks/bench_phase.py`, both side by side, 5 x 41 at
-N = 100): the vmapped call 5.39 s, the sequential chunks 4.45 s (it was 21.8 s vs 4.77 s
-before those changes, the homotopy running for all members at every gap), so
-`batch="auto"` still picks `"scan"` (one call per $\Psi_0$) on the CPU and `"vmap"`
-elsewhere.
+N = 100): the vmapped call 3.98 s, the sequential chunks 2.70 s, so `batch="auto"` picks
+`"scan"` (one call per $\Psi_0$) on the CPU and `"vmap"` elsewhere.
 
 With `out`, each finished chunk is written to `out/chunks/psi0_<deg>.nc` (NetCDF3 via
 scipy) and the run is resumable: a chunk whose file exists with the same grid, $s_0$

@@ -17,8 +17,10 @@ solve, finished by one Newton step past its tolerance, plus one Sturm count), to
 $\Delta s\sim 2^{-24}$ of the step wide, then by linear interpolation of the eigenvalue that
 crosses zero ($\mathsf K$'s eigenvalue nearest zero at both ends of the bracket,
 `jaxrod.linalg.kkt.critical_pair`): the state, the angle and the mode at its zero are off by
-the bracket's square, so $\alpha_c$ is exact to round-off at the given mesh (the root of the
-extended system, `jaxrod.critical_point`, to 1e-13 rad). On the mirror-symmetric branch the
+the bracket's square, so $\alpha_c$ is exact to round-off at the given mesh: Newton on the
+extended system (`jaxrod.critical_point`) started there moves it by at most 1.3e-13 rad at
+149 of the 150 snapping paths of a 5 x 17 grid of (Psi0, G/L) at N = 100, by 5e-11 rad at
+the other (a state through itself). On the mirror-symmetric branch the
 bracket's states are kept mirror-symmetric. The polish
 (`jaxrod.branches.located_critical_point`) checks that residual of the extended system and
 attaches its implicit derivative. Its kind: under symmetric actuation, a *branch point* if
