@@ -319,9 +319,9 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
     near_fold = jnp.any(inside & (jnp.abs(branches.tau_lam) < NEAR_FOLD))
     # the reported states must be configurations of the contact-free model: the critical
     # state (the start state where the path does not snap), the landed one, and every
-    # computed point of the stages that decided the path
-    crossed = (self_intersects(t, scene) | (snaps & landed & self_intersects(ta, scene))
-               | jnp.any(inside & branches.crossing))
+    # computed point of the stages that decided the path (both states through one check)
+    through = lax.map(lambda x: self_intersects(x, scene), jnp.stack([t, ta]))
+    crossed = through[0] | (snaps & landed & through[1]) | jnp.any(inside & branches.crossing)
     result = RESULTS.where(
         ~ok0, start_eq.result,
         RESULTS.where(incomplete, RESULTS.continuation_incomplete,
