@@ -86,7 +86,7 @@ ENTRIES = {
     "solve_equilibrium": ("jr.solve_equilibrium(scene, theta0), theta0 = jr.buckled_guess(scene, up=False)", True),
     "stability": ('jr.stability(eq), eq = jr.initial_state(scene, "down")', True),
     "snap_angles": ("jr.snap_angles(scene)", True),
-    "snap_angles_unpolished": ("jr.snap_angles(scene, polish=False) (no extended-system refinement)", False),
+    "snap_angles_unpolished": ("jr.snap_angles(scene, polish=False) (no polish: no extended-system residual check or derivative)", False),
     "snap_angles_extrapolated": ("jr.snap_angles_extrapolated(scene) (N = 100 and 200)", False),
     "hysteresis": ("jr.hysteresis(scene)", False),
     "phase_diagram": (f"jr.phase_diagram([60], {PHASE_GAPS}, n=100, progress=False)", False),

@@ -158,6 +158,28 @@ def test_located_critical_point_derivative_and_verdicts(snap, base, refine):
         assert loc(jnp.asarray(P0), t * jnp.nan, m, a, v, k).result == jr.RESULTS.nonfinite
 
 
+def test_derivative_where_a_fold_meets_a_branch_point():
+    """Creases of 90 deg at 0.3 L and 0.7 L, G/L = 0.5, N = 48: the snap-up fold lies where
+    the asymmetric mode is critical too, so the fold system's Jacobian is all but singular
+    (condition number > 1e10) and Newton on it does not converge from the located point; the
+    located point is `successful` and its implicit derivative d alpha_c / dG (the right-hand
+    side is mirror-symmetric, orthogonal to the near-null direction) matches central
+    differences to 1e-7."""
+    base = jr.make_scene(180.0, 0.5, n=48, creases=[(0.3, 90.0), (0.7, 90.0)])
+
+    def alpha(gap):
+        return jr.snap_angles(eqx.tree_at(lambda s: s.clamps.gap, base, gap)).up
+
+    p = alpha(0.5)
+    assert int(p.kind) == 1 and p.result == jr.RESULTS.successful and p.refine_result == jr.RESULTS.successful
+    cp = jr.critical_point(base, p.theta_before, p.force_before, p.alpha_c, p.mode, p.kind)
+    s = np.linalg.svd(np.asarray(extended_jacobian(base, cp)), compute_uv=False)
+    assert s[0] / s[-1] > 1e10 and cp.result != jr.RESULTS.successful
+    g = jax.grad(lambda x: alpha(x).alpha_c)(0.5)
+    fd = (alpha(0.5 + 1e-4).alpha_c - alpha(0.5 - 1e-4).alpha_c) / 2e-4
+    assert abs(float(g) / float(fd) - 1.0) < 1e-7
+
+
 def test_critical_pair_is_the_eigenvalue_nearest_zero(snap, base):
     """`kkt.critical_pair` next to a critical point: the eigenvalue of the Sturm bisection
     (`smallest_eigenvalues`) to 1e-9 relative (plus round-off, 1e-13 of the largest diagonal

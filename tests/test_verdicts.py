@@ -129,9 +129,9 @@ def test_path_through_itself_before_its_snap_is_flagged():
 
 
 def test_failed_refinement_says_no_derivative():
-    """Where the extended-system refinement is not accepted (here: the bisection value is
-    moved 1e-4 rad away, outside its 1e-6 rad acceptance), alpha_c stays the bisection
-    value and the path reads `derivative_unavailable`, not success."""
+    """Where the located critical point does not solve the extended system to tolerance
+    (here: alpha_c moved 1e-4 rad away from the located one), alpha_c stays as given and
+    the path reads `derivative_unavailable`, not success."""
     sc = jr.make_scene(psi0_deg=60, gap=0.5, n=N)
     raw = jr.snap_angles(sc, polish=False).up
     assert raw.result == OK and bool(raw.snaps)

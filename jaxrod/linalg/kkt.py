@@ -289,8 +289,3 @@ def critical_pair(K: BorderedTridiagonal):
     v, lam = lax.fori_loop(0, 3, it, (start / jnp.linalg.norm(start), jnp.zeros((), dtype)))
     i = jnp.argmax(jnp.abs(v))
     return v * jnp.where(v[i] < 0, -1.0, 1.0), lam
-
-
-def critical_mode(K: BorderedTridiagonal):
-    r"""The eigenvector of [`critical_pair`][] (the constrained eigenvalue nearest zero)."""
-    return critical_pair(K)[0]
