@@ -115,7 +115,10 @@ def _fh(scene, parameter, t, m, lam):
 
 
 def _refine(scene, parameter, branch, settings, tol, bisections):
-    """Bisection on arclength between the last stable and the first unstable point."""
+    """The critical point between the last stable and the first unstable point of `branch`:
+    bisection on arclength, then linear interpolation of the crossing eigenvalue across the
+    final bracket (module docstring). Returns its state `(theta, force, alpha)` and mode
+    (Euclidean unit norm)."""
     F, F_lam, Kf = _pieces(scene, parameter)
     w = discretize(scene).h
     i = branch.count - 1
