@@ -52,6 +52,12 @@ $dz^\ast/dp=-J^{-1}\partial_pR$ with $J$ the Jacobian at $z^\ast$, for every flo
 the scene ($\Psi_0$, $G$, $s_0$, the fixed clamp's angle for one-sided actuation, ...),
 under `jit`, `vmap`, `grad` and `jvp` (first derivatives; second derivatives through
 this step are not exact).
+
+**Located points.** [`located_critical_point`][] gives a point already located to round-off
+(the bisection and eigenvalue interpolation of [`jaxrod.snap_angles`][]) the same
+derivative without Newton's method: it checks the system's residual there and assembles
+$J$ only inside the derivative rule, so a program that only evaluates carries neither the
+Newton loop nor the Jacobian.
 """
 
 from __future__ import annotations
@@ -383,13 +389,17 @@ def _newton(res, z0, max_steps, tol_alpha, idx_alpha, jac=None, solve=batched.so
     return z, k, done, jnp.where(there, J, neutral), jnp.where(there, r, jnp.nan)
 
 
-def _implicit_step(res, z, jac_z, scene, solve=batched.solve):
+def _implicit_step(res, z, scene, solve=batched.solve, *, J=None, N=None, neutral=None):
     r"""The root `z` of `res(., scene)` with the implicit-function derivative
-    $dz/dp=-J^{-1}\partial_pR$ with respect to the float leaves $p$ of `scene` ($J$ =
-    `jac_z`, frozen). The value is `z` itself: the solve runs only in the derivative rule,
-    not in the forward program."""
+    $dz/dp=-J^{-1}\partial_pR$ with respect to the float leaves $p$ of `scene`. `J`: the
+    Jacobian at `z` (frozen; Newton's last), or None: assembled inside the derivative rule
+    (the fold layout of a scene with `N` segments), `neutral` where it is not finite, so that
+    the forward program carries no Jacobian. The value is `z` itself: the solve runs only in
+    the derivative rule, not in the forward program."""
     arrays, static = eqx.partition(scene, eqx.is_inexact_array)
-    z, jac_z = lax.stop_gradient(z), lax.stop_gradient(jac_z)
+    lazy = J is None
+    dense = scene.contact is not None  # a derivative rule may close over Python values only
+    z, J = lax.stop_gradient(z), lax.stop_gradient(neutral if lazy else J)
     # the residual's closed-over traced values (the normalization, a traced part of the scene)
     # become explicit arguments: a derivative rule may not close over tracers
     res_c, consts = jax.closure_convert(lambda z, a: res(z, eqx.combine(a, static)), z, arrays)
@@ -402,36 +412,14 @@ def _implicit_step(res, z, jac_z, scene, solve=batched.solve):
     def root_jvp(primals, tangents):
         z, J, arrays, consts = primals
         dp = tangents[2]
+        if lazy:
+            fn = lambda y: res_c(y, arrays, *consts)  # noqa: E731
+            Jz, _ = _with_value(fn)(z) if dense else _structured_jacobian(fn, z, *_layout(N, "fold"))
+            J = jnp.where(jnp.all(jnp.isfinite(Jz)), Jz, J)  # J holds the neutral stand-in
         _, dR = jax.jvp(lambda a: res_c(z, a, *consts), (arrays,), (dp,))
         return z, -solve(J, dR)
 
-    return root(z, jac_z, arrays, lax.stop_gradient(consts))
-
-
-def _implicit_root(res, z, scene, N, solve, neutral):
-    r"""`_implicit_step` with the Jacobian assembled inside the derivative rule (at `z`, from
-    `res`): the forward program carries no Jacobian. A non-finite Jacobian is replaced by
-    `neutral`, so that the derivative stays finite."""
-    arrays, static = eqx.partition(scene, eqx.is_inexact_array)
-    z = lax.stop_gradient(z)
-    res_c, consts = jax.closure_convert(lambda z, a: res(z, eqx.combine(a, static)), z, arrays)
-    dense = scene.contact is not None  # a derivative rule may close over Python values only
-
-    @jax.custom_jvp
-    def root(z, neutral, arrays, consts):
-        return z
-
-    @root.defjvp
-    def root_jvp(primals, tangents):
-        z, neutral, arrays, consts = primals
-        dp = tangents[2]
-        fn = lambda y: res_c(y, arrays, *consts)  # noqa: E731
-        J, _ = _with_value(fn)(z) if dense else _structured_jacobian(fn, z, *_layout(N, "fold"))
-        J = jnp.where(jnp.all(jnp.isfinite(J)), J, neutral)
-        _, dR = jax.jvp(lambda a: res_c(z, a, *consts), (arrays,), (dp,))
-        return z, -solve(J, dR)
-
-    return root(z, neutral, arrays, lax.stop_gradient(consts))
+    return root(z, J, arrays, lax.stop_gradient(consts))
 
 
 def extended_jacobian(scene, cp: CriticalPoint, parameter: AbstractParameter = SymmetricAlpha()):
@@ -476,7 +464,7 @@ def critical_point(scene, theta, force, alpha, mode, kind, *, parameter: Abstrac
     # and a neutral Jacobian, so that the gradient stays finite (a zero cotangent times inf is NaN)
     z_use = jnp.where(finite, z, p.z0)
     J = jnp.where(finite & jnp.all(jnp.isfinite(J)), J, p.neutral)
-    z = jnp.where(finite, _implicit_step(p.res, lax.stop_gradient(z_use), J, p.scene_d, p.solve), z)
+    z = jnp.where(finite, _implicit_step(p.res, z_use, p.scene_d, p.solve, J=J), z)
     result = RESULTS.where(done & finite, RESULTS.successful,
                            RESULTS.where(finite, RESULTS.max_steps_reached, RESULTS.nonfinite))
     return _critical_point(p, z, jnp.max(jnp.abs(r)), k, result)
@@ -548,7 +536,7 @@ def located_critical_point(scene, theta, force, alpha, mode, kind, *,
     (inside the derivative rule): a program that only evaluates carries the residual alone."""
     p = _problem(scene, theta, force, alpha, mode, kind, parameter)
     r = jnp.max(jnp.abs(p.res_sg(p.z0)))
-    z = _implicit_root(p.res, lax.stop_gradient(p.z0), p.scene_d, p.N, p.solve, p.neutral)
+    z = _implicit_step(p.res, p.z0, p.scene_d, p.solve, N=p.N, neutral=p.neutral)
     result = RESULTS.where(r <= LOCATED_TOL, RESULTS.successful,
                            RESULTS.where(jnp.isfinite(r), RESULTS.derivative_unavailable, RESULTS.nonfinite))
     return _critical_point(p, z, r, jnp.zeros((), jnp.int32), result)
@@ -643,7 +631,7 @@ def cusp_point(scene, theta, force, alpha, mode, *, parameter: AbstractParameter
     z_use = jnp.where(finite, z, z0)
     J = jnp.where(finite & jnp.all(jnp.isfinite(J)), J, neutral)
     r = jnp.max(jnp.abs(r))
-    z = jnp.where(finite, _implicit_step(res, sg(z_use), J, scene, solve), z)
+    z = jnp.where(finite, _implicit_step(res, z_use, scene, solve, J=J), z)
     t, m, a, vt, vm = _fold_unpack(z[:-1], N)
     result = RESULTS.where(done & finite, RESULTS.successful,
                            RESULTS.where(finite, RESULTS.max_steps_reached, RESULTS.nonfinite))
