@@ -143,7 +143,8 @@ def _brink_start(scene, alpha_c, theta_c, force_c, mode, exists, sgn, past, nudg
     with its critical `mode`), as one compiled program. The state is used as it is: solving
     it again at `alpha_c` would add nothing to its value, and the implicit derivative of a
     solve at a critical point divides by the Hessian's vanishing eigenvalue, where the
-    critical point's own refinement (`jaxrod.critical_point`) carries the right one."""
+    critical point's own derivative (its extended system's, `jaxrod.critical_point`) is
+    the right one."""
     a = alpha_c + sgn * past
     sc_c = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (alpha_c, alpha_c))
     sc_run = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (a, a))

@@ -42,8 +42,8 @@ that computes the gradient in reverse mode once and contracts it with the tangen
 `jacfwd` costs one reverse pass, not one per parameter; first derivatives only).
 
 **Where it is not differentiable (or not defined).** NaN where the path does not snap
-(no loss of stability, `snap_angles(...).snaps` false), where the refinement of the
-critical point failed, where the run does not snap within `t1`, where the integration
+(no loss of stability, `snap_angles(...).snaps` false), where the located critical point
+does not solve its extended system (`derivative_unavailable`), where the run does not snap within `t1`, where the integration
 is not trustworthy (conservative energy drift above `max_drift`: a step beyond the
 stability limit), or where the peak is within three samples of the stop (the fold speed
 still rising at the first overshoot, e.g. Psi0 <= 10 deg at G/L = 0.3, N = 24). Not
@@ -142,7 +142,7 @@ class SpeedRun(eqx.Module):
     and its critical point was refined), `snapped` (the fold crossed y = 0 within `t1`),
     `stopped` (the run ended at the snap's overshoot before `t1`), `peak_before_stop`;
     `result`: `successful` where `v_s` is valid, else the snap path's code (or `no_snap`,
-    or `derivative_unavailable` where its refinement failed), the trajectory's code,
+    or `derivative_unavailable` where its critical point carries no derivative), the trajectory's code,
     `snap_not_resolved`, or `energy_drift` (above `max_drift`); `v_s_creases` (m,): each
     crease's peak speed during the snap (`Strip.crease_list` order; NaN where not valid)."""
 
