@@ -225,7 +225,14 @@ def child(name, aot):
             s = time.perf_counter()
             jax.block_until_ready(compiled(*args))
             runs.append(time.perf_counter() - s)
+        # fused kernels of the optimized program: a count that does not drift with the machine's
+        # speed (XLA's backend, most of the compile, emits one kernel per fusion)
+        try:
+            kernels = getattr(compiled, "compiled", compiled).as_text().count(" fusion(")
+        except Exception:  # a backend without the optimized text
+            kernels = None
         out.update(lower_s=t1 - t0, compile_s=t2 - t1, first_run_s=t3 - t2, run_s=statistics.median(runs),
+                   fused_kernels=kernels,
                    **{f"aot_{k}": v for k, v in _summary(rec.items).items() if k != "top_programs"})
     else:
         t0 = time.perf_counter()
@@ -487,15 +494,16 @@ def _markdown(res):
         L += ["", "Ahead of time, for the entry points that are jitted themselves (`jaxrod._misc.jit`, an `equinox.filter_jit` with XLA options) and whose "
               f"first call took under {meta['aot_below_s']:g} s, each in another fresh process: `f.lower(*args)` "
               "(trace + lowering), `.compile()` (XLA), the compiled executable's first and steady (median of 3) "
-              "run.", "",
-              "| entry point | lower (s) | compile (s) | programs compiled | first run (s) | run (s) |",
-              "|---|---:|---:|---:|---:|---:|"]
+              "run, and its fused kernels (` fusion(` calls in its optimized HLO: a measure of the compile's size "
+              "that does not drift with the machine's speed).", "",
+              "| entry point | lower (s) | compile (s) | programs compiled | fused kernels | first run (s) | run (s) |",
+              "|---|---:|---:|---:|---:|---:|---:|"]
         for name, r in aot.items():
             if r.get("skipped"):
-                L.append(f"| `{name}` | skipped: {r['skipped']} | | | | |")
+                L.append(f"| `{name}` | skipped: {r['skipped']} | | | | | |")
                 continue
             L.append(f"| `{name}` | {r['lower_s']:.2f} | {r['compile_s']:.2f} | {r['aot_programs_compiled']} | "
-                     f"{r['first_run_s']:.3f} | {r['run_s']:.3f} |")
+                     f"{r.get('fused_kernels', '-')} | {r['first_run_s']:.3f} | {r['run_s']:.3f} |")
     if cli:
         L += ["", f"`{cli['command']}` on one fresh cache directory (the CLI caches programs that take >= 0.5 s "
               "to compile; the smaller ones are compiled again in every run):", "",
