@@ -163,7 +163,7 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2), warm=None):
 
     Every Newton solve of the homotopy runs at one call site, in one loop whose phase picks
     the scene and the guess: one compiled copy of the Newton solve instead of one per phase
-    (a copy is about 220 of the XLA kernels of `snap_angles`, whose compile time follows
+    (a copy is about 130 of the 1211 fused XLA kernels of `snap_angles`, whose compile time follows
     their number).
 
     Returns `(eq, found, warmed)`: the polished equilibrium (scene `target`), whether a path
