@@ -29,8 +29,8 @@ def _expected(pred, x, scale):
     return np.where(pred, np.sin(x) * scale, 0.0), np.where(pred, 7, -1)
 
 
-@pytest.mark.parametrize("runner", [run_if], ids=["run_if"])
-def test_values_unbatched_vmapped_and_nested(runner):
+def test_values_unbatched_vmapped_and_nested():
+    runner = run_if
     x = jnp.linspace(0.1, 2.0, 6)
     pred = jnp.array([True, False, True, True, False, False])
     call = lambda p, xi: runner(p, _fn, _default(xi), (xi, 2.0, "static"))  # noqa: E731

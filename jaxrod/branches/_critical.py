@@ -389,16 +389,15 @@ def _newton(res, z0, max_steps, tol_alpha, idx_alpha, jac=None, solve=batched.so
     return z, k, done, jnp.where(there, J, neutral), jnp.where(there, r, jnp.nan)
 
 
-def _implicit_step(res, z, scene, solve=batched.solve, *, J=None, N=None, neutral=None):
+def _implicit_step(res, z, scene, solve=batched.solve, *, J=None, jacobian=None, neutral=None):
     r"""The root `z` of `res(., scene)` with the implicit-function derivative
     $dz/dp=-J^{-1}\partial_pR$ with respect to the float leaves $p$ of `scene`. `J`: the
-    Jacobian at `z` (frozen; Newton's last), or None: assembled inside the derivative rule
-    (the fold layout of a scene with `N` segments), `neutral` where it is not finite, so that
-    the forward program carries no Jacobian. The value is `z` itself: the solve runs only in
+    Jacobian at `z` (frozen; Newton's last), or None: assembled inside the derivative rule by
+    `jacobian` (a residual -> `(z -> (Jacobian, residual))`, as `_jacobian_fn`), `neutral`
+    where it is not finite, so that the forward program carries no Jacobian. The value is `z` itself: the solve runs only in
     the derivative rule, not in the forward program."""
     arrays, static = eqx.partition(scene, eqx.is_inexact_array)
     lazy = J is None
-    dense = scene.contact is not None  # a derivative rule may close over Python values only
     z, J = lax.stop_gradient(z), lax.stop_gradient(neutral if lazy else J)
     # the residual's closed-over traced values (the normalization, a traced part of the scene)
     # become explicit arguments: a derivative rule may not close over tracers
@@ -413,8 +412,7 @@ def _implicit_step(res, z, scene, solve=batched.solve, *, J=None, N=None, neutra
         z, J, arrays, consts = primals
         dp = tangents[2]
         if lazy:
-            fn = lambda y: res_c(y, arrays, *consts)  # noqa: E731
-            Jz, _ = _with_value(fn)(z) if dense else _structured_jacobian(fn, z, *_layout(N, "fold"))
+            Jz, _ = jacobian(lambda y: res_c(y, arrays, *consts))(z)
             J = jnp.where(jnp.all(jnp.isfinite(Jz)), Jz, J)  # J holds the neutral stand-in
         _, dR = jax.jvp(lambda a: res_c(z, a, *consts), (arrays,), (dp,))
         return z, -solve(J, dR)
@@ -501,8 +499,10 @@ def _problem(scene, theta, force, alpha, mode, kind, parameter):
         scene_d = jax.tree.map(lambda p, q: jnp.where(bp, q, p) if eqx.is_inexact_array(q) else p, scene,
                                mirror_symmetric_part(scene))
     res_sg = lambda z: res(z, scene_sg)  # noqa: E731
+    # (the Jacobian's program depends on the scene only through whether it has self-contact)
+    jacobian = lambda f: _jacobian_fn(f, scene_sg, N, "fold")  # noqa: E731
     return SimpleNamespace(N=N, kind=kind, z0=z0, w=w, scene=scene, scene_d=scene_d, parameter=parameter, res=res,
-                           res_sg=res_sg, expand=expand, jac=_jacobian_fn(res_sg, scene_sg, N, "fold"),
+                           res_sg=res_sg, expand=expand, jacobian=jacobian, jac=jacobian(res_sg),
                            solve=_solver_fn(scene_sg, N, "fold"),
                            neutral=_neutral_jacobian(z0.shape[0], N, "fold", dtype))
 
@@ -536,7 +536,7 @@ def located_critical_point(scene, theta, force, alpha, mode, kind, *,
     (inside the derivative rule): a program that only evaluates carries the residual alone."""
     p = _problem(scene, theta, force, alpha, mode, kind, parameter)
     r = jnp.max(jnp.abs(p.res_sg(p.z0)))
-    z = _implicit_step(p.res, p.z0, p.scene_d, p.solve, N=p.N, neutral=p.neutral)
+    z = _implicit_step(p.res, p.z0, p.scene_d, p.solve, jacobian=p.jacobian, neutral=p.neutral)
     result = RESULTS.where(r <= LOCATED_TOL, RESULTS.successful,
                            RESULTS.where(jnp.isfinite(r), RESULTS.derivative_unavailable, RESULTS.nonfinite))
     return _critical_point(p, z, r, jnp.zeros((), jnp.int32), result)

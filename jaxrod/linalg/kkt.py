@@ -239,53 +239,42 @@ def _dense_smallest(K: BorderedDense):
     return _eigh(M)[0]  # rigid: the two eigenvalues near c (the constraint directions) come last
 
 
-def modes(K: BorderedTridiagonal, eigenvalues, iterations: int = 3):
-    """Eigenvectors (theta part, unit norm, columns) by shifted inverse iteration."""
+def _inverse_iteration(K: BorderedTridiagonal, lam, iterations: int):
+    r"""`(v, estimate)`: `iterations` steps of inverse iteration shifted just below `lam`
+    ($\sigma=\lambda-10^{-9}\max|\mathrm{diag}\,T|$) from a fixed smooth start, `v` the
+    theta part with unit norm and its largest component positive, `estimate` the eigenvalue
+    from the last step's Rayleigh quotient of the inverse, $\sigma+v^\top v/v^\top a$ with
+    $(\mathsf K-\sigma)\,a=v$."""
     N = K.n
     dtype = K.diag.dtype
     x = jnp.linspace(0.0, 1.0, N, dtype=dtype)
     start = 1.0 + jnp.sin(3.7 * x) + 0.5 * jnp.cos(11.3 * x) + 0.3 * x
+    sig = lam - 1e-9 * jnp.maximum(jnp.max(jnp.abs(K.diag)), 1.0)
 
-    scale = jnp.maximum(jnp.max(jnp.abs(K.diag)), 1.0)
+    def it(_, c):
+        v, _est = c
+        a, _b = solve(K, v, jnp.zeros(2, dtype), shift=sig)
+        return a / jnp.linalg.norm(a), sig + jnp.dot(v, v) / jnp.dot(v, a)
 
-    def one(lam):
-        sig = lam - 1e-9 * scale
+    v, est = lax.fori_loop(0, iterations, it, (start / jnp.linalg.norm(start), jnp.zeros((), dtype)))
+    return v * jnp.sign(v[jnp.argmax(jnp.abs(v))]), est
 
-        def it(_, v):
-            a, _b = solve(K, v, jnp.zeros(2, dtype), shift=sig)
-            return a / jnp.linalg.norm(a)
 
-        v = lax.fori_loop(0, iterations, it, start / jnp.linalg.norm(start))
-        return v
-
-    V = jax.vmap(one)(eigenvalues)  # (k, N)
-    # fix sign convention: largest component positive
-    i = jnp.argmax(jnp.abs(V), axis=1)
-    sgn = jnp.sign(V[jnp.arange(V.shape[0]), i])
-    return (V * sgn[:, None]).T
+def modes(K: BorderedTridiagonal, eigenvalues, iterations: int = 3):
+    """Eigenvectors (theta part, unit norm, largest component positive, columns) by shifted
+    inverse iteration."""
+    V, _ = jax.vmap(lambda lam: _inverse_iteration(K, lam, iterations))(eigenvalues)  # (k, N)
+    return V.T
 
 
 def critical_pair(K: BorderedTridiagonal):
     r"""The constrained eigenvalue nearest zero and its eigenvector (theta part, unit norm,
     largest component positive as in [`modes`][]): `(v, lam)`, by three steps of shifted
     inverse iteration at $\sigma\approx0$, the eigenvalue from the last step's Rayleigh
-    quotient of the inverse, $\lambda=\sigma+v^\top v/v^\top a$ with
-    $(\mathsf K-\sigma)\,a=v$. Meant for a state next to a critical point (a fold or a
-    branch point), where that eigenvalue is about zero and isolated: each step reduces the
-    other components by $|\lambda_1-\sigma|/|\lambda_2-\sigma|\ll1$ and the eigenvalue's
-    error is the square of the vector's. The vector of `modes(K, smallest_eigenvalues(K, 1))`
-    there, at the cost of 3 solves instead of 64 Sturm counts more."""
-    N = K.n
-    dtype = K.diag.dtype
-    x = jnp.linspace(0.0, 1.0, N, dtype=dtype)
-    start = 1.0 + jnp.sin(3.7 * x) + 0.5 * jnp.cos(11.3 * x) + 0.3 * x
-    sig = -1e-9 * jnp.maximum(jnp.max(jnp.abs(K.diag)), 1.0)
-
-    def it(_, c):
-        v, _lam = c
-        a, _b = solve(K, v, jnp.zeros(2, dtype), shift=sig)
-        return a / jnp.linalg.norm(a), sig + jnp.dot(v, v) / jnp.dot(v, a)
-
-    v, lam = lax.fori_loop(0, 3, it, (start / jnp.linalg.norm(start), jnp.zeros((), dtype)))
-    i = jnp.argmax(jnp.abs(v))
-    return v * jnp.where(v[i] < 0, -1.0, 1.0), lam
+    quotient of the inverse (`_inverse_iteration`). Meant for a state next to a critical
+    point (a fold or a branch point), where that eigenvalue is about zero and isolated: each
+    step reduces the other components by $|\lambda_1-\sigma|/|\lambda_2-\sigma|\ll1$ and the
+    eigenvalue's error is the square of the vector's. The vector of
+    `modes(K, smallest_eigenvalues(K, 1))` there, at the cost of 3 solves instead of 64
+    Sturm counts more."""
+    return _inverse_iteration(K, jnp.zeros((), K.diag.dtype), 3)
