@@ -18,6 +18,10 @@ import time
 
 import jax
 
+# run times of the steady state: XLA's optimizing code generation from the first call (jaxrod's
+# default "auto" compile mode reaches it once a program's calls have run long enough)
+os.environ.setdefault("JAXROD_COMPILE", "optimized")
+
 jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 

@@ -33,6 +33,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+# run times of the steady state: XLA's optimizing code generation from the first call (jaxrod's
+# default "auto" compile mode reaches it once a program's calls have run long enough)
+os.environ.setdefault("JAXROD_COMPILE", "optimized")
+
 jax.config.update("jax_enable_x64", True)
 
 import jaxrod as jr  # noqa: E402

@@ -52,6 +52,9 @@ from pathlib import Path
 # 2-core VM. Default to one BLAS thread; set OPENBLAS_NUM_THREADS yourself to override.
 # (Must happen before numpy / jax are imported.)
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# run times of the steady state: XLA's optimizing code generation from the first call (jaxrod's
+# default "auto" compile mode reaches it once a program's calls have run long enough)
+os.environ.setdefault("JAXROD_COMPILE", "optimized")
 
 import jax  # noqa: E402
 

@@ -50,6 +50,9 @@ from pathlib import Path
 
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# run times of the steady state: XLA's optimizing code generation from the first call (jaxrod's
+# default "auto" compile mode reaches it once a program's calls have run long enough)
+os.environ.setdefault("JAXROD_COMPILE", "optimized")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import jax  # noqa: E402

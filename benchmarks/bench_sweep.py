@@ -27,6 +27,10 @@ import subprocess
 import sys
 import time
 
+# run times of the steady state: XLA's optimizing code generation from the first call (jaxrod's
+# default "auto" compile mode reaches it once a program's calls have run long enough)
+os.environ.setdefault("JAXROD_COMPILE", "optimized")
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 GAPS = [round(0.2 + 0.05 * i, 2) for i in range(13)]
 PSI_A = [20.0, 40.0, 60.0, 80.0, 100.0, 120.0, 150.0, 180.0]

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import os
 import threading
+import time
 
 import equinox as eqx
 import jax
@@ -90,93 +92,266 @@ def concurrently(*calls):
     return (first,) + tuple(call() if r is _MISMATCH else r for call, r in zip(calls[1:], rest))
 
 
-TRACING = threading.Lock()
-"""Held while a first call's program is traced and lowered (pure Python, under the GIL):
-[`lowered_first`][] and the CLI's exports take it, so that of two first calls on two threads
-one compiles (XLA, off the GIL) while the other traces."""
-_LOWERED = set()
-
-
-def lowered_first(fun, key, *args, **kwargs):
-    """`fun(*args, **kwargs)` for a jitted `fun` (with `.lower`), traced and lowered under a
-    process-wide lock before its first call for `key` at the top level (a hashable that stands
-    for the arguments' structure and options; it decides only whether to lower first).
-
-    Tracing and lowering are Python, under the GIL; XLA's compile runs off it. Two first
-    calls on two threads ([`concurrently`][]) then trace one after the other, and the first
-    compiles while the second traces, instead of both tracing at half speed: the first call of
-    `jaxrod.snap_angles_extrapolated` at N = 100 + 200 takes 16.2-16.3 s instead of 17.3 s on 2
-    cores. The call itself reuses the lowering. Later calls for `key` skip the lock (a warm
-    `.lower` costs about 0.2 ms)."""
-    if key not in _LOWERED and _top_level():
-        with TRACING:
-            fun.lower(*args, **kwargs)
-        _LOWERED.add(key)
-    return fun(*args, **kwargs)
+TRACING = threading.RLock()
+"""Held while a program is traced and lowered (pure Python, under the GIL): [`jit`][]'s
+programs and the CLI's exports take it, so that of two first calls on two threads (the two
+meshes of `jaxrod.snap_angles_extrapolated`) one compiles (XLA, off the GIL) while the
+other traces, instead of both tracing at half speed: the first call of
+`snap_angles_extrapolated` at N = 100 + 200 takes 16.2-16.3 s instead of 17.3 s on 2 cores
+(at XLA's optimizing code generation). Reentrant: a lowering may start another."""
 
 
 FAST_COMPILE_OPTIONS = {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False}
-"""Added to `COMPILER_OPTIONS` in the "fast" compile mode (`compile_mode`): LLVM at -O0 and
-XLA's older loop emitters instead of its MLIR fusion emitters, whose own lowering pipeline is
-most of the compile time at -O0. The same IEEE operations (no fast-math), so the same results
-to round-off; measured on 2 cores for `snap_angles` at N = 100: 3.1 s of compile instead of
-7.1 s, 0.096 s per call instead of 0.049 s. The dynamics' programs (`dynamics_jit`) take
-these options alone in the fast mode (a brink `snap_dynamics` at N = 100: 6.5 s of trace and
-compile instead of 9.1 s, 1.1 s of run instead of 0.3 s). Worth it for one-off queries; sweeps
-and benchmarks want the default."""
+"""Added to `COMPILER_OPTIONS` for a program's fast code generation (`compile_mode`): LLVM at
+-O0 and XLA's older loop emitters instead of its MLIR fusion emitters, whose own lowering
+pipeline is most of the compile time at -O0. The same IEEE operations (no fast-math), so the
+same results to round-off; `snap_angles` at N = 100 on 2 cores compiles in about 2 s instead
+of 4.7 s and runs in 0.047 s instead of 0.026 s (`benchmarks/results/compile*.md`). The
+dynamics' programs (`dynamics_jit`) take these options alone."""
+
+COMPILE_MODES = ("auto", "fast", "optimized")
+
+TIER_UP_FACTOR = 5.0
+"""In the "auto" compile mode a program compiled with the fast code generation is compiled
+again with XLA's optimizing one once the calls of it have run for `TIER_UP_FACTOR` times its
+fast compile (about the optimized compile's cost: the optimized compile takes 2-2.5x the fast
+one and halves the run)."""
 
 
 def compile_mode() -> str:
-    """"optimized" (XLA's default code generation, the default) or "fast" (less compile time,
-    slower code: `FAST_COMPILE_OPTIONS`), from the environment variable `JAXROD_COMPILE`, read
-    at every call so that a process can switch."""
-    mode = os.environ.get("JAXROD_COMPILE", "optimized")
-    if mode not in ("optimized", "fast"):
-        raise ValueError(f"JAXROD_COMPILE: must be 'optimized' or 'fast', got {mode!r}")
+    """How jaxrod's jitted programs are compiled on the CPU, from the environment variable
+    `JAXROD_COMPILE`, read at every call so that a process can switch:
+
+    - "auto" (the default): tiered. Each program (one per function and argument signature)
+      is first compiled with the fast code generation (`FAST_COMPILE_OPTIONS`: half the
+      compile, about twice the run), and compiled again with XLA's optimizing code
+      generation once its calls have run for `TIER_UP_FACTOR` times that first compile, so a
+      one-off query pays the short compile and a sweep or a benchmark loop the short runs.
+    - "fast": the fast code generation only.
+    - "optimized": XLA's optimizing code generation from the first call."""
+    mode = os.environ.get("JAXROD_COMPILE", "auto")
+    if mode not in COMPILE_MODES:
+        raise ValueError(f"JAXROD_COMPILE: must be one of {', '.join(COMPILE_MODES)}, got {mode!r}")
     return mode
 
 
 def compiler_options(dynamics: bool = False, mode: str | None = None) -> dict:
-    """`COMPILER_OPTIONS` (plus `FAST_COMPILE_OPTIONS` in the "fast" `compile_mode`) where
-    JAX's default backend is the CPU (where they were measured), XLA's defaults on
-    accelerators. `dynamics`: the options of the dynamics' programs, XLA's defaults in the
-    "optimized" mode (their step loops run slower without the disabled passes) and
-    `FAST_COMPILE_OPTIONS` alone in the "fast" one. `mode`: the compile mode, default
+    """XLA options of a program on the CPU: `COMPILER_OPTIONS` in the "optimized" mode, plus
+    `FAST_COMPILE_OPTIONS` in the "fast" one (and for the first tier of the "auto" one);
+    XLA's defaults on accelerators. `dynamics`: the options of the dynamics' programs, XLA's
+    defaults when optimized (their step loops run slower without the disabled passes) and
+    `FAST_COMPILE_OPTIONS` alone when fast. `mode`: the compile mode, default
     `compile_mode()`."""
     if jax.default_backend() != "cpu":
         return {}
-    fast = (compile_mode() if mode is None else mode) == "fast"
+    fast = (compile_mode() if mode is None else mode) in ("fast", "auto")
     if dynamics:
         return dict(FAST_COMPILE_OPTIONS) if fast else {}
-    return {**COMPILER_OPTIONS, **FAST_COMPILE_OPTIONS} if fast else COMPILER_OPTIONS
+    return {**COMPILER_OPTIONS, **FAST_COMPILE_OPTIONS} if fast else dict(COMPILER_OPTIONS)
+
+
+def _signature(args, kwargs):
+    """A hashable stand-in for what an `equinox.filter_jit` program depends on: the arrays'
+    structure, shapes, dtypes and weak types, the other (static) leaves by type and value,
+    and JAX's thread-local configuration; None where a static leaf is not hashable."""
+    dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
+    arrays, arrays_tree = jax.tree.flatten(dynamic)
+    leaves, static_tree = jax.tree.flatten(static)
+    key = (arrays_tree, tuple((np.shape(x), np.dtype(x.dtype).name, bool(getattr(x, "weak_type", False)))
+                              for x in arrays),
+           static_tree, tuple((type(x), x) for x in leaves), _trace_context())
+    try:
+        hash(key)
+    except TypeError:
+        return None
+    return key
+
+
+class _Program:
+    """One compiled program of a jitted function for one argument signature: its executable,
+    the code generation it was compiled with ("fast" or "optimized"), how long that compile
+    took and how long its calls have run."""
+
+    __slots__ = ("lowered", "compiled", "tier", "compile_s", "run_s")
+
+    def __init__(self):
+        self.lowered, self.compiled, self.tier, self.compile_s, self.run_s = False, None, None, 0.0, 0.0
+
+
+_TABLES = []
+
+
+def clear_programs():
+    """Drop every program compiled through [`jit`][] (what `jax.clear_caches` does for
+    JAX's own caches; call both to release compiled code)."""
+    for table in _TABLES:
+        table.clear()
+
+
+class _Programs:
+    """The compiled programs of one function at the top level, one per argument signature
+    (the `MAX_PROGRAMS` most recently used), each lowered once (under `TRACING`) and compiled
+    ahead of time with the options of its tier (`compile_mode`)."""
+
+    MAX_PROGRAMS = 64
+
+    def __init__(self, plain, dynamics):
+        import collections
+
+        self.plain, self.dynamics = plain, dynamics
+        self.table = collections.OrderedDict()
+        _TABLES.append(self.table)
+
+    def _lower(self, prog, args, kwargs):
+        # the first lowering under TRACING; later ones are warm (JAX caches them) and skip it
+        with (contextlib.nullcontext() if prog.lowered else TRACING):
+            lowered = self.plain.lower(*args, **kwargs)
+        prog.lowered = True
+        return lowered
+
+    def _compile(self, prog, tier, args, kwargs):
+        lowered = self._lower(prog, args, kwargs)
+        t0 = time.perf_counter()
+        prog.compiled = lowered.compile(compiler_options(self.dynamics, tier))
+        prog.tier, prog.compile_s = tier, time.perf_counter() - t0
+
+    def entry(self, args, kwargs, mode, compile=True):
+        """The program for `args`, compiled for `mode` (only traced and lowered where not
+        `compile`); None where the arguments have no hashable signature."""
+        key = _signature(args, kwargs)
+        if key is None:
+            return None
+        prog = self.table.get(key)
+        if prog is None:
+            prog = self.table[key] = _Program()
+            while len(self.table) > self.MAX_PROGRAMS:
+                self.table.popitem(last=False)
+        else:
+            self.table.move_to_end(key)
+        if not compile:
+            if not prog.lowered:
+                self._lower(prog, args, kwargs)
+            return prog
+        want = "optimized" if mode == "optimized" else "fast"
+        if prog.tier is None or (want == "optimized" and prog.tier == "fast"):
+            self._compile(prog, want, args, kwargs)
+        return prog
+
+    def __call__(self, args, kwargs, mode):
+        prog = self.entry(args, kwargs, mode)
+        if prog is None:
+            return _MISMATCH
+        t0 = time.perf_counter()
+        out = jax.block_until_ready(_run_compiled(prog.compiled, args, kwargs))
+        prog.run_s += time.perf_counter() - t0
+        if mode == "auto" and prog.tier == "fast" and prog.run_s >= TIER_UP_FACTOR * prog.compile_s:
+            self._compile(prog, "optimized", args, kwargs)
+        return out
+
+
+def _run_compiled(compiled, args, kwargs):
+    """An ahead-of-time compiled `equinox.filter_jit` program called on `args`, with the
+    message of an `equinox.error_if` raised as `equinox.EquinoxRuntimeError` (and JAX's log
+    record of the failed callback dropped), as a jitted call raises it."""
+    import logging
+
+    logger = logging.getLogger("jax._src.callback")
+    logger.addFilter(_quiet_callback_failure)
+    try:
+        return compiled(*args, **kwargs)
+    except jax.errors.JaxRuntimeError as e:
+        text = str(e)
+        marker = "_EquinoxRuntimeError: "
+        if marker not in text:
+            raise
+        raise eqx.EquinoxRuntimeError(text.split(marker, 1)[1].split("\n", 1)[0]) from None
+    finally:
+        logger.removeFilter(_quiet_callback_failure)
+
+
+def _quiet_callback_failure(record) -> bool:
+    """A logging filter that drops JAX's "jax.pure_callback failed" record (with the
+    traceback of an `equinox.error_if`, whose message the caller raises instead)."""
+    return record.getMessage() != "jax.pure_callback failed"
 
 
 def jit(fun, *, dynamics: bool = False):
-    """`equinox.filter_jit` with jaxrod's XLA options (`compiler_options(dynamics)`, one
-    compiled variant per compile mode) where the call is not inside a JAX transformation;
-    inside one (where JAX allows no options) the plain `equinox.filter_jit`, so an eager
-    `jax.grad` or `jax.vmap` of an entry point compiles with XLA's defaults. `.lower` picks
-    the same way."""
+    """`equinox.filter_jit` with jaxrod's XLA options (`compiler_options(dynamics)`) and
+    compile mode (`compile_mode`) where the call is not inside a JAX transformation: there
+    each argument signature's program is lowered once and compiled ahead of time for its
+    tier (`_Programs`; in the default "auto" mode it tiers up from the fast to the
+    optimizing code generation). Inside a transformation (where JAX allows no options) the
+    plain `equinox.filter_jit`, so an eager `jax.grad` or `jax.vmap` of an entry point
+    compiles with XLA's defaults; so does an accelerator backend.
+
+    The wrapper has `.lower(*args, **kwargs)` (JAX's ahead-of-time path with the options of
+    the mode's first tier), `.trace(*args, **kwargs)`, which traces and lowers the top-level
+    program for those arguments, and `.prepare(*args, **kwargs)`, which also compiles it,
+    neither running it: a caller can then compile one program while a worker thread traces
+    another (see `jaxrod.snap_dynamics`)."""
     plain = eqx.filter_jit(fun)
     variants = {}
+    programs = _Programs(plain, dynamics)
 
-    def pick():
-        if not _top_level():
-            return plain
-        mode = compile_mode()
-        opts = compiler_options(dynamics, mode)
-        if not opts:
-            return plain
-        if mode not in variants:
-            variants[mode] = eqx.filter_jit(fun, compiler_options=opts)
-        return variants[mode]
+    def tiered():
+        return _top_level() and jax.default_backend() == "cpu"
 
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):
-        return pick()(*args, **kwargs)
+        if not tiered():
+            return plain(*args, **kwargs)
+        out = programs(args, kwargs, compile_mode())
+        return plain(*args, **kwargs) if out is _MISMATCH else out
 
-    wrapper.lower = lambda *args, **kwargs: pick().lower(*args, **kwargs)
+    def lower(*args, **kwargs):
+        mode = compile_mode()
+        opts = compiler_options(dynamics, mode) if _top_level() else {}
+        if not opts:
+            return plain.lower(*args, **kwargs)
+        if mode not in variants:
+            variants[mode] = eqx.filter_jit(fun, compiler_options=opts)
+        return variants[mode].lower(*args, **kwargs)
+
+    def prepare(*args, **kwargs):
+        if tiered():
+            programs.entry(args, kwargs, compile_mode())
+
+    def trace(*args, **kwargs):
+        if tiered():
+            programs.entry(args, kwargs, compile_mode(), compile=False)
+
+    wrapper.lower, wrapper.prepare, wrapper.trace, wrapper.programs = lower, prepare, trace, programs
     return wrapper
+
+
+def _placeholder(x):
+    """A zero array of `x`'s shape, dtype and weak type (a `jax.ShapeDtypeStruct`), or `x`
+    itself where it is not one."""
+    if not isinstance(x, jax.ShapeDtypeStruct):
+        return x
+    if getattr(x, "weak_type", False):
+        return jnp.broadcast_to(jnp.asarray(np.zeros((), x.dtype).item()), x.shape)
+    return jnp.zeros(x.shape, x.dtype)
+
+
+def with_program_beside(make, program, arguments):
+    """`make()`, with `program` (a [`jit`][]-wrapped function) compiled for the arguments
+    that `arguments(make())` will give, on a worker thread while `make()` runs: the
+    arguments' shapes come from `equinox.filter_eval_shape(make)` (which traces what `make`
+    calls, so its own calls then lower from JAX's caches), stood in for by zeros of those
+    shapes. On two cores the worker traces `program` (Python, under the GIL) while `make()`
+    compiles (XLA, off it): a first `jaxrod.snap_dynamics` overlaps the trace of `simulate`
+    with the compile of `snap_angles`. Values are unaffected: the real call of `program`
+    looks its compiled program up by its own arguments' signature (a mismatch would compile
+    again). Only at the top level (otherwise, or with one core, `make()` alone)."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if (cores < 2 or not _top_level() or jax.default_backend() != "cpu"
+            or threading.current_thread().name.startswith(_WORKER_PREFIX)):
+        return make()
+    shapes = eqx.filter_eval_shape(make)
+    args, kwargs = jax.tree.map(_placeholder, arguments(shapes))
+    made, _ = concurrently(make, lambda: program.prepare(*args, **kwargs))
+    return made
 
 
 def dynamics_jit(fun):

@@ -95,12 +95,16 @@ def map_limit():
 
 
 def release_compiled_programs(threshold):
-    """`jax.clear_caches()` when this process holds more than `threshold` mappings; returns
-    (mappings before, mappings after), or None when nothing was released."""
+    """`jax.clear_caches()` and `jaxrod._misc.clear_programs()` when this process holds more
+    than `threshold` mappings; returns (mappings before, mappings after), or None when
+    nothing was released."""
+    from jaxrod._misc import clear_programs
+
     before = map_count()
     if before is None or before <= threshold:
         return None
     jax.clear_caches()
+    clear_programs()
     gc.collect()
     return before, map_count()
 

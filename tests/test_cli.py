@@ -241,20 +241,3 @@ def test_unwritable_output_is_one_input_error(tmp_path):
             raise PermissionError(13, "Permission denied")
     with writing("plot", target):  # nothing raised: nothing reported
         pass
-
-
-def test_snap_angles_query_compiles_fast_unless_told(monkeypatch):
-    """`snap-angles` (milliseconds of run after seconds of compile) sets JAXROD_COMPILE=fast
-    for its own programs where the user has not chosen, and leaves the environment as it was."""
-    import os
-
-    from jaxrod.cli._main import _default_compile_mode
-
-    monkeypatch.delenv("JAXROD_COMPILE", raising=False)
-    with _default_compile_mode("fast"):
-        assert os.environ["JAXROD_COMPILE"] == "fast"
-    assert "JAXROD_COMPILE" not in os.environ
-    monkeypatch.setenv("JAXROD_COMPILE", "optimized")
-    with _default_compile_mode("fast"):
-        assert os.environ["JAXROD_COMPILE"] == "optimized"
-    assert os.environ["JAXROD_COMPILE"] == "optimized"

@@ -1,5 +1,7 @@
 """jaxrod's jit: XLA options at the top level, the plain jit inside any JAX transformation."""
 
+import contextlib
+import os
 import re
 
 import equinox as eqx
@@ -58,21 +60,51 @@ def test_options_reach_the_compiler():
     assert _sine_in_loop_body(ours.compiled.as_text())
     assert not _sine_in_loop_body(default.compiled.as_text())
     np.testing.assert_allclose(ours(*args), default(*args), rtol=1e-15)
+    called = jit(_invariant_loop)  # the call path's program, in every compile mode
+    for mode in ("auto", "fast", "optimized"):
+        with _env("JAXROD_COMPILE", mode):
+            np.testing.assert_allclose(called(*args), default(*args), rtol=1e-15)
+            assert _sine_in_loop_body(_program(called, *args).compiled.as_text())
 
 
-def test_fast_compile_mode(monkeypatch):
-    """JAXROD_COMPILE=fast: jaxrod's jit compiles with FAST_COMPILE_OPTIONS (in its own
-    variant, read at each call) and gives the same values; a bad value is one ValueError
-    naming the variable, and the CLI's exit 2."""
-    from jaxrod._misc import COMPILER_OPTIONS, FAST_COMPILE_OPTIONS, compiler_options
+def _program(f, *args, **kwargs):
+    from jaxrod._misc import _signature
+
+    return f.programs.table[_signature(args, kwargs)].compiled
+
+
+@contextlib.contextmanager
+def _env(name, value):
+    old = os.environ.get(name)
+    os.environ[name] = value
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop(name)
+        else:
+            os.environ[name] = old
+
+
+def test_compile_modes(monkeypatch):
+    """JAXROD_COMPILE: "auto" (the default) and "fast" compile the first tier with
+    FAST_COMPILE_OPTIONS, "optimized" with COMPILER_OPTIONS alone; the same values in every
+    mode; a bad value is one ValueError naming the variable, and the CLI's exit 2."""
+    from jaxrod._misc import COMPILER_OPTIONS, FAST_COMPILE_OPTIONS, compile_mode, compiler_options
     from jaxrod.cli import main
 
     a = jnp.asarray(2.0)
-    slow = float(_newton_sqrt(a))
+    monkeypatch.delenv("JAXROD_COMPILE", raising=False)
+    assert compile_mode() == "auto"
+    fast = {**COMPILER_OPTIONS, **FAST_COMPILE_OPTIONS}
+    assert compiler_options() == fast
+    ref = float(_newton_sqrt(a))
+    monkeypatch.setenv("JAXROD_COMPILE", "optimized")
     assert compiler_options() == COMPILER_OPTIONS
+    assert float(_newton_sqrt(a)) == ref
     monkeypatch.setenv("JAXROD_COMPILE", "fast")
-    assert compiler_options() == {**COMPILER_OPTIONS, **FAST_COMPILE_OPTIONS}
-    assert float(_newton_sqrt(a)) == slow
+    assert compiler_options() == fast
+    assert float(_newton_sqrt(a)) == ref
     monkeypatch.setenv("JAXROD_COMPILE", "quick")
     try:
         _newton_sqrt(a)
@@ -83,21 +115,75 @@ def test_fast_compile_mode(monkeypatch):
     assert main(["equilibrium", "--n", "8", "--json"]) == 2
 
 
-def test_dynamics_programs_keep_xla_loop_passes(monkeypatch):
-    """The dynamics' jit compiles with XLA's defaults (the loop-invariant sine hoisted out of
-    the loop, as without jaxrod's options), and in the fast mode with FAST_COMPILE_OPTIONS
-    alone; the same values either way."""
-    from jaxrod._misc import FAST_COMPILE_OPTIONS, compiler_options, dynamics_jit
+def _tier(f, *args, **kwargs):
+    from jaxrod._misc import _signature
 
-    args = (jnp.asarray(2.0), jnp.asarray(3.0))
-    loop = dynamics_jit(_invariant_loop)
-    assert compiler_options(dynamics=True) == {}
-    ref = float(loop(*args))
-    assert not _sine_in_loop_body(loop.lower(*args).compile().compiled.as_text())
+    return f.programs.table[_signature(args, kwargs)].tier
+
+
+def test_auto_mode_tiers_up_after_enough_run_time(monkeypatch):
+    """In the "auto" mode a program is compiled with the fast code generation and runs from
+    it until its calls have run for TIER_UP_FACTOR times that compile, then is compiled with
+    the optimizing one (same values); "optimized" compiles it optimized at once, and
+    "fast" never tiers up. A new static value or weak type is a new program."""
+    from jaxrod import _misc
+
+    monkeypatch.delenv("JAXROD_COMPILE", raising=False)
+    f = jit(_sqrt)
+    a = jnp.asarray(3.0)
+    ref = float(f(a))
+    assert _tier(f, a) == "fast"
+    prog = f.programs.table[_misc._signature((a,), {})]
+    assert prog.run_s > 0 and prog.compile_s > 0
     monkeypatch.setenv("JAXROD_COMPILE", "fast")
-    assert compiler_options(dynamics=True) == FAST_COMPILE_OPTIONS
-    assert not _sine_in_loop_body(loop.lower(*args).compile().compiled.as_text())
-    assert float(loop(*args)) == ref
+    monkeypatch.setattr(_misc, "TIER_UP_FACTOR", 0.0)
+    assert float(f(a)) == ref and _tier(f, a) == "fast"
+    monkeypatch.delenv("JAXROD_COMPILE")
+    assert float(f(a)) == ref and _tier(f, a) == "optimized"
+    assert float(f(a)) == ref  # from the optimized program
+    monkeypatch.setattr(_misc, "TIER_UP_FACTOR", 1e9)
+    b = jnp.asarray(np.float64(3.0), dtype=jnp.float64)
+    w = jnp.asarray(3.0)  # weak-typed (a Python float)
+    assert not b.weak_type and w.weak_type
+    f(b)
+    assert _tier(f, b) == "fast" and len(f.programs.table) == 2
+    g = jit(lambda x, k: x * k)
+    assert float(g(a, 2.0)) == 6.0 and float(g(a, 3.0)) == 9.0 and float(g(a, 3)) == 9.0
+    assert len(g.programs.table) == 3  # 2.0, 3.0 and the integer 3 are three static values
+    monkeypatch.setenv("JAXROD_COMPILE", "optimized")
+    h = jit(_sqrt)
+    h(a)
+    assert _tier(h, a) == "optimized"
+
+
+def test_trace_prepare_and_program_beside(monkeypatch):
+    """`.trace` lowers without compiling, `.prepare` compiles without running, and a call
+    then reuses that program; `with_program_beside` returns what `make()` returns and leaves
+    the program compiled for the arguments that its result gives."""
+    from jaxrod import _misc
+
+    monkeypatch.delenv("JAXROD_COMPILE", raising=False)
+    monkeypatch.setattr(_misc, "TIER_UP_FACTOR", 1e9)
+    f = jit(_sqrt)
+    a = jnp.asarray(5.0)
+    f.trace(a)
+    prog = f.programs.table[_misc._signature((a,), {})]
+    assert prog.lowered and prog.compiled is None
+    f.prepare(a)
+    compiled = prog.compiled
+    assert compiled is not None and prog.run_s == 0.0
+    assert float(f(a)) == float(np.sqrt(5.0)) and prog.compiled is compiled
+
+    double = jit(lambda x: 2.0 * x)
+    monkeypatch.setattr(_misc.os, "sched_getaffinity", lambda _: {0, 1}, raising=False)
+    x = jnp.arange(4.0)
+    x = x + 1.0
+    made = _misc.with_program_beside(lambda: double(x), _newton_sqrt, lambda y: ((y,), {}))
+    np.testing.assert_array_equal(made, 2.0 * x)
+    prog = _newton_sqrt.programs.table[_misc._signature((made,), {})]
+    assert prog.compiled is not None and prog.run_s == 0.0  # compiled beside, not run
+    np.testing.assert_allclose(_newton_sqrt(made), np.sqrt(2.0 * np.arange(1.0, 5.0)), rtol=1e-15)
+    assert not _misc.TRACING._is_owned()
 
 
 def test_concurrently_runs_calls_in_threads_and_keeps_their_meaning(monkeypatch):
@@ -153,30 +239,3 @@ def test_concurrently_runs_calls_in_threads_and_keeps_their_meaning(monkeypatch)
     names.clear()
     _misc.concurrently(lambda: call(a), lambda: call(a))
     assert set(names) == {threading.current_thread().name}
-
-
-def test_lowered_first_lowers_once_per_key_and_only_at_the_top_level():
-    """`lowered_first` traces and lowers before the first call of a key at the top level (under
-    its lock), not again for that key, and not inside a transformation; its value is the
-    call's."""
-    from jaxrod import _misc
-
-    f = jax.jit(lambda x: 2.0 * x)
-    lowered = []
-
-    class Counting:
-        def lower(self, *a, **k):
-            lowered.append(a)
-            return f.lower(*a, **k)
-
-        def __call__(self, *a, **k):
-            return f(*a, **k)
-
-    g = Counting()
-    key = ("test", object())
-    assert float(_misc.lowered_first(g, key, jnp.asarray(1.5))) == 3.0 and len(lowered) == 1
-    assert float(_misc.lowered_first(g, key, jnp.asarray(2.0))) == 4.0 and len(lowered) == 1
-    other = ("test", object())
-    out = jax.jit(lambda x: _misc.lowered_first(g, other, x))(jnp.asarray(1.0))
-    assert float(out) == 2.0 and len(lowered) == 1 and other not in _misc._LOWERED
-    assert not _misc.TRACING.locked()

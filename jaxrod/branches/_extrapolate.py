@@ -25,13 +25,12 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array
 
 from ..model import Mesh, Scene
 from ._snap import SnapAngles, SnapPath, snap_angles
-from .._misc import concurrently, lowered_first
+from .._misc import concurrently
 from ..results import RESULTS
 
 
@@ -145,11 +144,7 @@ def snap_angles_extrapolated(scene: Scene, *, continue_after_snap: bool = False,
     fine_scene = refined_scene(scene)
     kwargs = dict(kwargs, continue_after_snap=continue_after_snap)
 
-    def run(sc):
-        key = ("snap_angles", jax.tree.structure(sc), str(jnp.result_type(sc.strip.psi0)), repr(sorted(kwargs.items())))
-        return lowered_first(snap_angles, key, sc, **kwargs)
-
-    fine, coarse = concurrently(lambda: run(fine_scene), lambda: run(scene))
+    fine, coarse = concurrently(lambda: snap_angles(fine_scene, **kwargs), lambda: snap_angles(scene, **kwargs))
     up, down = _extrapolate_paths(*(_read(getattr(m, d)) for m in (coarse, fine) for d in ("up", "down")))
     return ExtrapolatedSnapAngles(up=up, down=down, coarse=coarse, fine=fine, n_coarse=scene.mesh.n,
                                   n_fine=fine_scene.mesh.n)

@@ -30,9 +30,8 @@ Units: L = B = lambda = 1 (nondimensional); angles in degrees.
 Exit codes: 0 ok, 2 bad input, 3 no converged equilibrium (JSON still printed).
 Compiled code is cached between runs in ~/.cache/jaxrod/xla (or JAX_COMPILATION_CACHE_DIR),
 and snap-angles' lowered programs in ~/.cache/jaxrod/exported; JAXROD_NO_CACHE=1 disables
-both. The first run of a command compiles for up to a minute. JAXROD_COMPILE=fast|optimized
-chooses XLA's code generation (snap-angles defaults to fast, every other command to
-optimized)."""
+both. JAXROD_COMPILE=auto|fast|optimized chooses XLA's code generation (auto, the default:
+each program compiled fast first and optimized once its runs have taken long enough)."""
 
 
 # modules that register more subcommands (see `_build_parser`)
@@ -522,23 +521,6 @@ def _snap_arrays(scene, continue_after_snap=True):
     return out
 
 
-@contextlib.contextmanager
-def _default_compile_mode(mode):
-    """`JAXROD_COMPILE=mode` inside the block where the user has not set it. A one-off query
-    such as `snap-angles` runs for milliseconds after seconds of compilation: the fast mode
-    halves the compile (a cold `jaxrod snap-angles` 30 s -> 16 s on 2 cores, the two meshes'
-    programs then compiling side by side) for a run twice as long, which the user does not
-    notice; the longer runs (`phase`, `snap`, sweeps) keep XLA's optimized code."""
-    if "JAXROD_COMPILE" in os.environ:
-        yield
-        return
-    os.environ["JAXROD_COMPILE"] = mode
-    try:
-        yield
-    finally:
-        os.environ.pop("JAXROD_COMPILE", None)
-
-
 def _extrapolated_arrays(coarse, fine, factor=2):
     """`jaxrod.snap_angles_extrapolated`'s values from the two meshes' `_snap_arrays`
     (`jaxrod.extrapolate_path`), the second critical points extrapolated where both meshes
@@ -622,14 +604,13 @@ def _cmd_snap_angles(args):
         fine, coarse = concurrently(lambda: one_mesh(fine_scene, False), lambda: one_mesh(scene, False))
         return _extrapolated_arrays(coarse, fine)
 
-    with _default_compile_mode("fast"):
-        out = run(scene)
-        if contact_mode(args) == "auto":
-            clear = [float(out[f"clearance_{d}"]) for d in ("up", "down")]
-            res = [_result_name(out[f"result_{d}"]) for d in ("up", "down")]
-            if needs_contact([c if np.isfinite(c) else None for c in clear], res):
-                scene = make_scene_from_args(args, contact=True)
-                out = run(scene)
+    out = run(scene)
+    if contact_mode(args) == "auto":
+        clear = [float(out[f"clearance_{d}"]) for d in ("up", "down")]
+        res = [_result_name(out[f"result_{d}"]) for d in ("up", "down")]
+        if needs_contact([c if np.isfinite(c) else None for c in clear], res):
+            scene = make_scene_from_args(args, contact=True)
+            out = run(scene)
 
     def val(x, deg=False):
         x = float(x)

@@ -34,7 +34,7 @@ from ._equations import Protocol, check_run_settings
 from ..energy.geometry import discretize
 from ..statics import initial_state
 from ..linalg.batched import solve2
-from .._misc import check_param, dynamics_jit
+from .._misc import check_param, dynamics_jit, with_program_beside
 from ..branches import snap_angles, snap_routes
 from ..results import RESULTS
 from ..energy.bending import bending_energy as _bending
@@ -208,15 +208,22 @@ def snap_dynamics(scene, direction="up", *, kind="brink", nudge=NUDGE, past=1e-3
     names = inspect.signature(check_run_settings).parameters
     check_run_settings(**{k: v for k, v in simulate_kwargs.items() if k in names})
     if kind == "brink":
-        start = brink(scene, direction, nudge=nudge, past=past, snap=snap, route=route)
+        def make():
+            return brink(scene, direction, nudge=nudge, past=past, snap=snap, route=route)
     elif kind == "ramp":
-        start = ramp(scene, direction, rate=rate, alpha_start=alpha_start, snap=snap, seed=seed)
-    elif kind == "asymmetric":
-        start = ramp(scene, direction, rate=rate, alpha_start=0.0 if alpha_start is None else alpha_start,
-                     right_only=True, seed=seed)
-        simulate_kwargs.setdefault("stop_at_snap", False)
+        def make():
+            return ramp(scene, direction, rate=rate, alpha_start=alpha_start, snap=snap, seed=seed)
     else:
-        raise ValueError(f"kind must be 'brink', 'ramp' or 'asymmetric', got {kind!r}")
-    simulate_kwargs.setdefault("direction", start.direction)
+        def make():
+            return ramp(scene, direction, rate=rate, alpha_start=0.0 if alpha_start is None else alpha_start,
+                        right_only=True, seed=seed)
+        simulate_kwargs.setdefault("stop_at_snap", False)
+    simulate_kwargs.setdefault("direction", _direction(direction))
+
+    def arguments(start):
+        return (start.scene, start.theta0, start.protocol), simulate_kwargs
+
+    # simulate's program is compiled for the start's shapes while the statics compile
+    start = with_program_beside(make, simulate, arguments)
     traj = simulate(start.scene, start.theta0, start.protocol, **simulate_kwargs)
     return start, traj
