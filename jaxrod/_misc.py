@@ -200,6 +200,7 @@ class _Programs:
 
         self.plain, self.dynamics = plain, dynamics
         self.table = collections.OrderedDict()
+        self.lock = threading.Lock()  # the table's bookkeeping (two threads' first calls)
         _TABLES.append(self.table)
 
     def _lower(self, prog, args, kwargs):
@@ -221,13 +222,14 @@ class _Programs:
         key = _signature(args, kwargs)
         if key is None:
             return None
-        prog = self.table.get(key)
-        if prog is None:
-            prog = self.table[key] = _Program()
-            while len(self.table) > self.MAX_PROGRAMS:
-                self.table.popitem(last=False)
-        else:
-            self.table.move_to_end(key)
+        with self.lock:
+            prog = self.table.get(key)
+            if prog is None:
+                prog = self.table[key] = _Program()
+                while len(self.table) > self.MAX_PROGRAMS:
+                    self.table.popitem(last=False)
+            else:
+                self.table.move_to_end(key)
         if not compile:
             if not prog.lowered:
                 self._lower(prog, args, kwargs)
