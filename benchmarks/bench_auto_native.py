@@ -479,7 +479,8 @@ def machine_info():
                 auto_dir=str(auto_snap.auto_dir()), gfortran=gf, git=git("rev-parse", "--short=10", "HEAD"),
                 dirty=bool(git("status", "--porcelain", "--untracked-files=no")),
                 devices=[str(d) for d in jax.devices()], openblas_threads=os.environ.get("OPENBLAS_NUM_THREADS"),
-                omp_threads=os.environ.get("OMP_NUM_THREADS"), load_start=list(os.getloadavg()))
+                omp_threads=os.environ.get("OMP_NUM_THREADS"), compile_mode=os.environ.get("JAXROD_COMPILE"),
+                load_start=list(os.getloadavg()))
 
 
 def _fmt(x, spec):
@@ -506,7 +507,9 @@ def write_md(res, path):
         f"Machine: {m['cpu']} ({m['cpus']} CPUs), {m['platform']}; Python {m['python']}, jax {m['jax']}, "
         f"jaxrod {m['jaxrod']} (git {m['git']}{', dirty tree' if m['dirty'] else ''}), AUTO-07p {m['auto_07p']} "
         f"(Debian package), {m['gfortran']}; OPENBLAS_NUM_THREADS={m['openblas_threads']}, "
-        f"OMP_NUM_THREADS={m['omp_threads']}; load average at start / end {m['load_start'][0]:.2f} / "
+        f"OMP_NUM_THREADS={m['omp_threads']}, JAXROD_COMPILE={m.get('compile_mode') or 'optimized'} (XLA's "
+        "optimizing code generation from the first call: the steady state of the default compile mode); "
+        f"load average at start / end {m['load_start'][0]:.2f} / "
         f"{m['load_end'][0]:.2f} (a shared machine: times are noisy upper bounds).",
         "",
         f"Question: Psi0 = {PSI0_DEG:g} deg, G/L = {GAP}, s0 = {S0} L, symmetric clamp rotation; both snap angles "
