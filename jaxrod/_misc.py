@@ -348,12 +348,16 @@ def with_program_beside(make, program, arguments):
     compiles (XLA, off it): a first `jaxrod.snap_dynamics` overlaps the trace of `simulate`
     with the compile of `snap_angles`. Values are unaffected: the real call of `program`
     looks its compiled program up by its own arguments' signature (a mismatch would compile
-    again). Only at the top level (otherwise, or with one core, `make()` alone)."""
+    again). Only at the top level (otherwise, with one core, or where `make` cannot be
+    traced abstractly, `make()` alone)."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     if (cores < 2 or not _top_level() or jax.default_backend() != "cpu"
             or threading.current_thread().name.startswith(_WORKER_PREFIX)):
         return make()
-    shapes = eqx.filter_eval_shape(make)
+    try:
+        shapes = eqx.filter_eval_shape(make)
+    except Exception:  # noqa: BLE001 - only an optimization: make() then runs alone, raising its own errors
+        return make()
     args, kwargs = jax.tree.map(_placeholder, arguments(shapes))
     made, _ = concurrently(make, lambda: program.prepare(*args, **kwargs))
     return made

@@ -183,6 +183,9 @@ def test_trace_prepare_and_program_beside(monkeypatch):
     prog = _newton_sqrt.programs.table[_misc._signature((made,), {})]
     assert prog.compiled is not None and prog.run_s == 0.0  # compiled beside, not run
     np.testing.assert_allclose(_newton_sqrt(made), np.sqrt(2.0 * np.arange(1.0, 5.0)), rtol=1e-15)
+    # a `make` that needs concrete values (no abstract trace): it runs alone
+    concrete = _misc.with_program_beside(lambda: float(x[1]) * 2.0, _newton_sqrt, lambda y: ((y,), {}))
+    assert concrete == 4.0
     assert not _misc.TRACING._is_owned()
 
 
