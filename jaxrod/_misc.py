@@ -131,7 +131,10 @@ def compile_mode() -> str:
       generation once its calls have run for `TIER_UP_FACTOR` times that first compile, so a
       one-off query pays the short compile and a sweep or a benchmark loop the short runs.
     - "fast": the fast code generation only.
-    - "optimized": XLA's optimizing code generation from the first call."""
+    - "optimized": XLA's optimizing code generation from the first call.
+
+    A program already compiled with the optimizing code generation is kept when the mode
+    changes to "fast" or "auto" (its values are the same to round-off)."""
     mode = os.environ.get("JAXROD_COMPILE", "auto")
     if mode not in COMPILE_MODES:
         raise ValueError(f"JAXROD_COMPILE: must be one of {', '.join(COMPILE_MODES)}, got {mode!r}")

@@ -189,6 +189,27 @@ def test_trace_prepare_and_program_beside(monkeypatch):
     assert not _misc.TRACING._is_owned()
 
 
+def test_dynamics_programs_keep_xla_loop_passes(monkeypatch):
+    """The dynamics' jit compiles with XLA's defaults when optimized (the loop-invariant sine
+    hoisted out of the loop, as without jaxrod's options), with FAST_COMPILE_OPTIONS alone
+    when fast (the first tier of the default mode); the same values either way, through
+    `.lower` and through the call."""
+    from jaxrod._misc import FAST_COMPILE_OPTIONS, compiler_options, dynamics_jit
+
+    args = (jnp.asarray(2.0), jnp.asarray(3.0))
+    loop = dynamics_jit(_invariant_loop)
+    monkeypatch.setenv("JAXROD_COMPILE", "optimized")
+    assert compiler_options(dynamics=True) == {}
+    ref = float(loop(*args))
+    assert not _sine_in_loop_body(loop.lower(*args).compile().compiled.as_text())
+    assert not _sine_in_loop_body(_program(loop, *args).compiled.as_text())
+    for mode in ("fast", "auto"):
+        monkeypatch.setenv("JAXROD_COMPILE", mode)
+        assert compiler_options(dynamics=True) == FAST_COMPILE_OPTIONS
+        assert not _sine_in_loop_body(loop.lower(*args).compile().compiled.as_text())
+        assert float(loop(*args)) == ref
+
+
 def test_concurrently_runs_calls_in_threads_and_keeps_their_meaning(monkeypatch):
     """`concurrently`: results in order; calls on other threads where the machine has cores
     (each program runs on its caller's thread); a worker without the caller's thread-local
