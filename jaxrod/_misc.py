@@ -189,9 +189,18 @@ _TABLES = []
 
 def clear_programs():
     """Drop every program compiled through [`jit`][] (what `jax.clear_caches` does for
-    JAX's own caches; call both to release compiled code)."""
+    JAX's own caches)."""
     for table in _TABLES:
         table.clear()
+
+
+def clear_caches():
+    """Release the compiled programs of jaxrod and JAX (`jax.clear_caches`): the next call
+    of each entry point traces and compiles again. A process that compiles thousands of
+    distinct programs (many meshes) can reach Linux's limit on memory mappings without it
+    (README, "Known limitations")."""
+    jax.clear_caches()
+    clear_programs()
 
 
 class _Programs:

@@ -20,7 +20,7 @@ compilation error: Cannot allocate memory" and the worker dies of a segfault, in
 `backend_compile_and_load` or, reading the persistent cache, in `get_executable_and_time`
 (both reproduced here with the limit lowered). Two CI runs died in exactly those frames,
 the second 99 % through the suite. A fresh-clone run without the release peaked at 56,422 mappings in one worker;
-with it, at 29,976. `_release_compiled_programs` calls `jax.clear_caches()` after any module
+with it, at 29,976. `_release_compiled_programs` calls `jaxrod.clear_caches()` after any module
 that leaves the worker above a third of the limit (`JAXROD_TEST_MAP_LOG=FILE` logs the
 count before and after each module; the largest single module, test_snap, adds ~12,000).
 
@@ -99,16 +99,15 @@ def map_limit():
 
 
 def release_compiled_programs(threshold):
-    """`jax.clear_caches()` and `jaxrod._misc.clear_programs()` when this process holds more
+    """`jaxrod.clear_caches()` (its programs and JAX's caches) when this process holds more
     than `threshold` mappings; returns (mappings before, mappings after), or None when
     nothing was released."""
-    from jaxrod._misc import clear_programs
+    import jaxrod
 
     before = map_count()
     if before is None or before <= threshold:
         return None
-    jax.clear_caches()
-    clear_programs()
+    jaxrod.clear_caches()
     gc.collect()
     return before, map_count()
 

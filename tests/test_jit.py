@@ -263,3 +263,17 @@ def test_concurrently_runs_calls_in_threads_and_keeps_their_meaning(monkeypatch)
     names.clear()
     _misc.concurrently(lambda: call(a), lambda: call(a))
     assert set(names) == {threading.current_thread().name}
+
+
+def test_clear_caches_releases_jaxrods_programs():
+    """`jaxrod.clear_caches()` empties every jitted function's program table (and JAX's
+    caches); the next call compiles again, to the same value."""
+    import jaxrod
+
+    f = jit(_sqrt)
+    a = jnp.asarray(7.0)
+    ref = float(f(a))
+    assert len(f.programs.table) == 1
+    jaxrod.clear_caches()
+    assert len(f.programs.table) == 0
+    assert float(f(a)) == ref and len(f.programs.table) == 1
