@@ -124,7 +124,8 @@ def _tier(f, *args, **kwargs):
 def test_auto_mode_tiers_up_after_enough_run_time(monkeypatch):
     """In the "auto" mode a program is compiled with the fast code generation and runs from
     it until its calls have run for TIER_UP_FACTOR times that compile, then is compiled with
-    the optimizing one (same values); "optimized" compiles it optimized at once, and
+    the optimizing one on a thread of its own, which replaces it when done (same values);
+    "optimized" compiles it optimized at once, and
     "fast" never tiers up. A new static value or weak type is a new program."""
     from jaxrod import _misc
 
@@ -139,8 +140,14 @@ def test_auto_mode_tiers_up_after_enough_run_time(monkeypatch):
     monkeypatch.setattr(_misc, "TIER_UP_FACTOR", 0.0)
     assert float(f(a)) == ref and _tier(f, a) == "fast"
     monkeypatch.delenv("JAXROD_COMPILE")
-    assert float(f(a)) == ref and _tier(f, a) == "optimized"
+    fast = prog.compiled
+    assert float(f(a)) == ref  # the fast program's value; the optimized compile starts on a thread
+    assert prog.tier_up is not None and prog.tier_up.name == "jaxrod-tier-up" and not prog.tier_up.daemon
+    prog.wait()
+    assert _tier(f, a) == "optimized" and prog.compiled is not fast
     assert float(f(a)) == ref  # from the optimized program
+    f(a)
+    assert prog.compiled is not fast and _tier(f, a) == "optimized"  # no second tier-up
     monkeypatch.setattr(_misc, "TIER_UP_FACTOR", 1e9)
     b = jnp.asarray(np.float64(3.0), dtype=jnp.float64)
     w = jnp.asarray(3.0)  # weak-typed (a Python float)
