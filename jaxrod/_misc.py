@@ -60,6 +60,11 @@ def _in_worker(call, context):
     return call()
 
 
+def _cores() -> int:
+    """The cores this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
 def concurrently(*calls):
     """The results of the zero-argument `calls`, in order, computed concurrently where that
     is safe and useful: at the top level (no JAX transformation tracing) on a machine with
@@ -77,8 +82,7 @@ def concurrently(*calls):
     the other. Exceptions reach the caller as they would from a plain call."""
     global _POOL
 
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if (len(calls) < 2 or cores < 2 or not _top_level()
+    if (len(calls) < 2 or _cores() < 2 or not _top_level()
             or threading.current_thread().name.startswith(_WORKER_PREFIX)):
         return tuple(call() for call in calls)
     if _POOL is None:
@@ -390,8 +394,7 @@ def with_program_beside(make, program, arguments):
     looks its compiled program up by its own arguments' signature (a mismatch would compile
     again). Only at the top level (otherwise, with one core, or where `make` cannot be
     traced abstractly, `make()` alone)."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if (cores < 2 or not _top_level() or jax.default_backend() != "cpu"
+    if (_cores() < 2 or not _top_level() or jax.default_backend() != "cpu"
             or threading.current_thread().name.startswith(_WORKER_PREFIX)):
         return make()
     try:
@@ -404,8 +407,8 @@ def with_program_beside(make, program, arguments):
 
 
 def dynamics_jit(fun):
-    """[`jit`][] for the dynamics' programs: XLA's defaults, or `FAST_COMPILE_OPTIONS` in the
-    "fast" compile mode."""
+    """[`jit`][] for the dynamics' programs: XLA's defaults for the optimizing code
+    generation, `FAST_COMPILE_OPTIONS` alone for the fast one."""
     return jit(fun, dynamics=True)
 
 
