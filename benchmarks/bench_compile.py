@@ -32,7 +32,7 @@ s0 = 0.02 L, N = 100, float64):
   path: `f.lower(...)` (trace + lowering), `.compile()` (XLA), and a call of the compiled
   executable; its lower / compile split agrees with the log records' one.
 * The CLI: the installed console script `jaxrod snap-angles --psi0 60 --gap 0.5 --json`
-  (in its own default compile mode, the fast one for this query, unless `--mode` sets one)
+  (in jaxrod's default compile mode unless `--mode` sets another)
   run three times against one fresh persistent cache (XDG_CACHE_HOME pointed at an empty
   temporary directory, so the CLI's default ~/.cache/jaxrod/xla lands there): cold (empty
   cache: compiles and writes the cache), warm (reads it), and warm again. Wall time of the
@@ -307,7 +307,7 @@ def _cli(timeout):
         pp = os.pathsep.join([str(site)] + ([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else []))
         env = _env(XDG_CACHE_HOME=str(xdg), JAX_LOG_COMPILES="1", PYTHONPATH=pp)
         if env.get("JAXROD_COMPILE") == "auto":
-            env.pop("JAXROD_COMPILE")  # the CLI as users run it: its own default (fast for the query)
+            env.pop("JAXROD_COMPILE")  # the CLI as users run it: the default mode
         for label in ("cold", "warm", "warm_again"):
             t0 = time.perf_counter()
             try:
