@@ -176,9 +176,10 @@ def _record(start, tr, phys=None):
     return rec
 
 
-def _clearance(scene, tr):
-    """The smallest clearance over the run's frames (segments at least N/10 apart, as
-    `jaxrod snap-angles` reports it), in L; NaN without a finite frame."""
+def _clearance(scene, tr, theta0=None):
+    """The smallest clearance over the run's frames and the start state `theta0` (segments
+    at least N/10 apart, as `jaxrod snap-angles` reports it), in L; NaN without a finite
+    state."""
     import equinox as eqx
     import jax
     import jax.numpy as jnp
@@ -187,6 +188,8 @@ def _clearance(scene, tr):
     import jaxrod as jr
 
     th = np.asarray(tr.theta)
+    if theta0 is not None:
+        th = np.concatenate([np.asarray(theta0)[None], th])
     th = th[np.all(np.isfinite(th), axis=1)]  # frames after the run's stop are inf
     if not th.size:
         return float("nan")
@@ -205,9 +208,7 @@ def _cmd_snap(args):
     def run(scene):
         start, tr = run_snap(_array_leaves(scene), args, args.scene)
         rec = _record(start, tr, phys)
-        m = clearance_separation(args.n)
-        c0 = float(jr.clearance(start.theta0, start.scene, min_separation=m)) / float(start.scene.strip.length)
-        c = min(_clearance(start.scene, tr), c0)  # the start state and every frame
+        c = _clearance(start.scene, tr, start.theta0)  # the start state and every frame, one program
         rec["clearance"] = c if math.isfinite(c) else None
         rec.update(_contact_record(start.scene))
         return start, tr, rec
