@@ -96,6 +96,21 @@ def test_resume_recomputes_nothing(report, monkeypatch):
     assert json.loads((out / "cache.json").read_text()) == cache.data
 
 
+def test_cache_of_other_code_is_dropped(tmp_path, monkeypatch):
+    """A cache written by other code (another source digest, or none) is not reused: its
+    points and its trajectories are dropped; one written by this code is kept."""
+    (tmp_path / "traj").mkdir()
+    (tmp_path / "traj" / "snap_30_0.5_60_rattle.npz").write_bytes(b"old")
+    (tmp_path / "cache.json").write_text(json.dumps({"snap/30/0.8/60": {"alpha_up": 1.0}}))
+    cache = rp._Cache(str(tmp_path / "cache.json"))
+    assert "snap/30/0.8/60" not in cache.data and not list((tmp_path / "traj").iterdir())
+    assert cache.get("k", lambda: 2.0) == 2.0
+    again = rp._Cache(str(tmp_path / "cache.json"))
+    assert again.data["k"] == 2.0  # same code: kept
+    monkeypatch.setattr(rp._Cache, "SOURCE_KEY", "__other__")
+    assert "k" not in rp._Cache(str(tmp_path / "cache.json")).data
+
+
 def test_loops_figure_2ab(tmp_path):
     cache = rp._Cache(str(tmp_path / "cache.json"))
     title, _, rows, data = rp.section_loops(cache, 24, str(tmp_path), False)

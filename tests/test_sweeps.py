@@ -170,13 +170,16 @@ def test_two_processes_on_the_loopback(tmp_path):
 
 @pytest.mark.slow
 def test_devices_and_processes_give_identical_phase_diagrams(tmp_path):
+    # 4 devices vs 1, 2 processes vs 1: the same kinds and codes, the angles to round-off (XLA
+    # compiles the per-device program for each mesh; the critical angle interpolated across
+    # its bisection bracket feels that round-off: 8.5e-11 deg measured)
     (r4,) = run_sweep_workers(tmp_path / "four", "phase,phase_sharding,phase_one,phase_scan", devices=4)
-    _same_phase(r4["phase_shard"], r4["phase_one"], 0)  # 4 devices vs 1: bit for bit
-    _same_phase(r4["phase_sharding"], r4["phase_one"], 0)
+    _same_phase(r4["phase_shard"], r4["phase_one"], 1e-9)
+    _same_phase(r4["phase_sharding"], r4["phase_one"], 1e-9)
     _same_phase(r4["phase_shard"], r4["phase_scan"], 1e-9)
     r0, r1 = run_sweep_workers(tmp_path / "two", "phase", devices=2, processes=2)
-    _same_phase(r0["phase_shard"], r4["phase_shard"], 0)
-    _same_phase(r1["phase_shard"], r4["phase_shard"], 0)
+    _same_phase(r0["phase_shard"], r4["phase_shard"], 1e-9)
+    _same_phase(r1["phase_shard"], r4["phase_shard"], 1e-9)
 
 
 @pytest.mark.slow

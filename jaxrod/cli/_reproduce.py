@@ -28,8 +28,18 @@ import numpy as np
 
 
 class _Cache:
+    """The computed points of a run (`DIR/cache.json`), so that an interrupted run resumes
+    without computing them again. They hold for the code that computed them: the file
+    records a digest of jaxrod's source (`SOURCE_KEY`), and a cache written by other code is
+    dropped, with the trajectories it keeps beside it (`DIR/traj/`)."""
+
+    SOURCE_KEY = "__jaxrod_source__"
+
     def __init__(self, path):
+        from ._exported import _source_digest
+
         self.path = path
+        self.digest = _source_digest()
         self.data = {}
         if os.path.exists(path):
             try:
@@ -37,6 +47,13 @@ class _Cache:
                     self.data = json.load(f)
             except (OSError, ValueError):
                 self.data = {}
+        if self.data.get(self.SOURCE_KEY) != self.digest:
+            self.data = {self.SOURCE_KEY: self.digest}
+            traj = os.path.join(os.path.dirname(path), "traj")
+            if os.path.isdir(traj):
+                for name in os.listdir(traj):
+                    if name.endswith(".npz"):
+                        os.remove(os.path.join(traj, name))
 
     def get(self, key, fn):
         if key not in self.data:
