@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import logging
 import math
 import os
 import threading
@@ -237,15 +238,16 @@ class _Programs:
         prog.lowered = True
         return lowered
 
-    def _compile(self, prog, tier, args, kwargs):
-        lowered = self._lower(prog, args, kwargs)
+    def _compile(self, prog, lowered, tier):
+        """Compile `lowered` for `tier` and make it `prog`'s program (the fields set together
+        at the end, so that a call on another thread sees the old program or the new one)."""
         t0 = time.perf_counter()
-        prog.compiled = lowered.compile(compiler_options(self.dynamics, tier))
-        prog.tier, prog.compile_s = tier, time.perf_counter() - t0
+        compiled = lowered.compile(compiler_options(self.dynamics, tier))
+        prog.compile_s, prog.tier, prog.compiled = time.perf_counter() - t0, tier, compiled
 
-    def entry(self, args, kwargs, mode, compile=True):
-        """The program for `args`, compiled for `mode` (only traced and lowered where not
-        `compile`); None where the arguments have no hashable signature."""
+    def entry(self, args, kwargs, mode):
+        """The program for `args`, compiled for `mode`; None where the arguments have no
+        hashable signature."""
         key = _signature(args, kwargs)
         if key is None:
             return None
@@ -257,13 +259,9 @@ class _Programs:
                     self.table.popitem(last=False)
             else:
                 self.table.move_to_end(key)
-        if not compile:
-            if not prog.lowered:
-                self._lower(prog, args, kwargs)
-            return prog
         want = "optimized" if mode == "optimized" else "fast"
         if prog.tier is None or (want == "optimized" and prog.tier == "fast"):
-            self._compile(prog, want, args, kwargs)
+            self._compile(prog, self._lower(prog, args, kwargs), want)
         return prog
 
     def __call__(self, args, kwargs, mode):
@@ -284,15 +282,12 @@ class _Programs:
         replaces it. A compile that fails leaves the fast program in place. The thread is not
         a daemon: a process that ends during a tier-up waits for it (seconds)."""
         lowered = self._lower(prog, args, kwargs)
-        opts = compiler_options(self.dynamics, "optimized")
 
         def compile_optimized():
-            t0 = time.perf_counter()
             try:
-                compiled = lowered.compile(opts)
+                self._compile(prog, lowered, "optimized")
             except Exception:  # noqa: BLE001 - e.g. out of memory: the fast program stays
-                return
-            prog.compile_s, prog.tier, prog.compiled = time.perf_counter() - t0, "optimized", compiled
+                pass
 
         prog.tier_up = threading.Thread(target=compile_optimized, name="jaxrod-tier-up")
         prog.tier_up.start()
@@ -302,8 +297,6 @@ def _run_compiled(compiled, args, kwargs):
     """An ahead-of-time compiled `equinox.filter_jit` program called on `args`, with the
     message of an `equinox.error_if` raised as `equinox.EquinoxRuntimeError` (and JAX's log
     record of the failed callback dropped), as a jitted call raises it."""
-    import logging
-
     logger = logging.getLogger("jax._src.callback")
     logger.addFilter(_quiet_callback_failure)
     try:
@@ -334,10 +327,9 @@ def jit(fun, *, dynamics: bool = False):
     compiles with XLA's defaults; so does an accelerator backend.
 
     The wrapper has `.lower(*args, **kwargs)` (JAX's ahead-of-time path with the options of
-    the mode's first tier), `.trace(*args, **kwargs)`, which traces and lowers the top-level
-    program for those arguments, and `.prepare(*args, **kwargs)`, which also compiles it,
-    neither running it: a caller can then compile one program while a worker thread traces
-    another (see `jaxrod.snap_dynamics`)."""
+    the mode's first tier) and `.prepare(*args, **kwargs)`, which traces, lowers and compiles
+    the top-level program for those arguments without running it, so that a worker thread
+    can prepare one program while the caller compiles another (`with_program_beside`)."""
     plain = eqx.filter_jit(fun)
     variants = {}
     programs = _Programs(plain, dynamics)
@@ -365,11 +357,7 @@ def jit(fun, *, dynamics: bool = False):
         if tiered():
             programs.entry(args, kwargs, compile_mode())
 
-    def trace(*args, **kwargs):
-        if tiered():
-            programs.entry(args, kwargs, compile_mode(), compile=False)
-
-    wrapper.lower, wrapper.prepare, wrapper.trace, wrapper.programs = lower, prepare, trace, programs
+    wrapper.lower, wrapper.prepare, wrapper.programs = lower, prepare, programs
     return wrapper
 
 

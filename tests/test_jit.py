@@ -163,9 +163,8 @@ def test_auto_mode_tiers_up_after_enough_run_time(monkeypatch):
     assert _tier(h, a) == "optimized"
 
 
-def test_trace_prepare_and_program_beside(monkeypatch):
-    """`.trace` lowers without compiling, `.prepare` compiles without running, and a call
-    then reuses that program; `with_program_beside` returns what `make()` returns and leaves
+def test_prepare_and_program_beside(monkeypatch):
+    """`.prepare` compiles without running, and a call then reuses that program; `with_program_beside` returns what `make()` returns and leaves
     the program compiled for the arguments that its result gives."""
     from jaxrod import _misc
 
@@ -173,10 +172,8 @@ def test_trace_prepare_and_program_beside(monkeypatch):
     monkeypatch.setattr(_misc, "TIER_UP_FACTOR", 1e9)
     f = jit(_sqrt)
     a = jnp.asarray(5.0)
-    f.trace(a)
-    prog = f.programs.table[_misc._signature((a,), {})]
-    assert prog.lowered and prog.compiled is None
     f.prepare(a)
+    prog = f.programs.table[_misc._signature((a,), {})]
     compiled = prog.compiled
     assert compiled is not None and prog.run_s == 0.0
     assert float(f(a)) == float(np.sqrt(5.0)) and prog.compiled is compiled
