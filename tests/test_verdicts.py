@@ -111,7 +111,7 @@ def test_path_through_itself_before_its_snap_is_flagged():
     themselves, but the strip passes through itself on the way there: the path is
     `self_intersecting`, and `branch.crossing` marks exactly the computed points that an
     independent crossing test finds."""
-    p = _snap(30, 0.34).down
+    p = _snap(30, 0.34, continue_after_snap=True).down
     h = np.full(N, 1.0 / N)
     assert bool(p.snaps)
     assert not crosses(p.theta_before, h) and not crosses(p.theta_after, h)
@@ -121,7 +121,7 @@ def test_path_through_itself_before_its_snap_is_flagged():
     assert np.asarray(p.branch.crossing[0, :count]).tolist() == ref
     assert not np.any(np.asarray(p.branch.crossing[0, count:]))
     assert p.result == jr.RESULTS.self_intersecting
-    # the landed branch after the snap is checked point by point too
+    # the landed branch after the snap (with `continue_after_snap`) is checked point by point too
     count1 = int(p.branch.count[1])
     assert count1 > 1
     ref1 = [crosses(p.branch.theta[1, k], h) for k in range(count1)]

@@ -386,12 +386,10 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
         nu = kkt.count_below(Kn, jnp.zeros(1, dtype))[0]
         i = c["i"]
         b = c["buf"]
-        nb = dict(
-            lam=b["lam"].at[i].set(ln), theta=b["theta"].at[i].set(tn), force=b["force"].at[i].set(mn),
-            tau_lam=b["tau_lam"].at[i].set(nl), num_unstable=b["num_unstable"].at[i].set(nu),
-            fold_height=b["fold_height"].at[i].set(fh(tn, mn, ln)), ds=b["ds"].at[i].set(ds),
-        )
-        b = jax.tree.map(lambda new, old: jnp.where(conv, new, old), nb, b)
+        # row i is written whether or not the point was accepted (a rejected point leaves it
+        # as it was): one row per step, never a select over the whole buffer
+        row = dict(lam=ln, theta=tn, force=mn, tau_lam=nl, num_unstable=nu, fold_height=fh(tn, mn, ln), ds=ds)
+        b = {k: b[k].at[i].set(jnp.where(conv, row[k], b[k][i])) for k in b}
         i_new = jnp.where(conv, i + 1, i)
         grow = jnp.where(k <= 3, 1.5, 1.0)
         ds_new = jnp.where(conv, jnp.minimum(ds * grow, settings.ds_max), 0.5 * ds)

@@ -62,7 +62,7 @@ class SnapPath(eqx.Module):
     `fold_height_before`, `theta_after`/`fold_height_after` the state it lands in,
     `branch` the continuation stages (leading axis: stage; a supercritical branch point
     is followed by a second stage on the asymmetric branch, a snap by one on the landed
-    branch unless `continue_after_snap=False`), `result` and `start_result` (below),
+    branch with `continue_after_snap=True`), `result` and `start_result` (below),
     `stop` (the deciding `Branch.stop`), `refine_result` (the RESULTS code of the polish: whether the located critical
     point solves the extended system, `jaxrod.branches.located_critical_point`),
     `mode` the critical mode (angle part, unit $L^2$ norm, at the located critical point), `jump` the $L^2$ distance of the
@@ -235,7 +235,7 @@ def _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bise
 
 
 def follow_path(scene, start_eq, direction, parameter, settings, bound, bisections, tol, stages=2,
-          continue_after_snap=True, substituted=False):
+          continue_after_snap=False, substituted=False):
     """One direction of the loop. After a loss of stability the critical state is pushed
     along the unstable mode 1e-3 rad past alpha_c and relaxed. At a fold the strip snaps
     there, however small the jump (past a fold the branch has no equilibrium nearby: the
@@ -365,7 +365,7 @@ class SnapAngles(eqx.Module):
 
 @jit
 def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float = jnp.pi,
-                bisections: int = 24, polish: bool = True, continue_after_snap: bool = True) -> SnapAngles:
+                bisections: int = 24, polish: bool = True, continue_after_snap: bool = False) -> SnapAngles:
     r"""Critical clamp angles $\alpha_{c,\rm up}>0$ and $\alpha_{c,\rm down}<0$ of a scene
     under symmetric clamp rotation, their kinds, the states just before and after.
 
@@ -377,8 +377,11 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     derivative, `jaxrod.branches.located_critical_point`): the same $\alpha_c$, without a
     gradient (`refine_result` is `None`; a branch point's critical state is not projected
     onto the mirror-symmetric states, ~1e-7 rad). Used by [`jaxrod.phase_diagram`][].
-    `continue_after_snap=False` does not follow the landed branch after a snap (the second
-    `branch` stage is then empty, `count` 0); the critical angles are the same.
+    `continue_after_snap=True` also follows the landed branch after a snap to $|\alpha|=$`bound`
+    (the post-snap branch of a hysteresis figure, in the `branch` stage after the deciding
+    one); by default that stage is empty (`count` 0): the critical angles, kinds, states and
+    codes are the same either way, and the landed branch costs about as much again as the
+    rest of the call.
 
     The angles are those of the scene's mesh: second-order accurate, off by up to 0.17 deg
     at N = 100 ($s_0=0.02$). For the continuum value use
@@ -403,7 +406,7 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     return _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, continue_after_snap)
 
 
-def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, continue_after_snap=True):
+def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, continue_after_snap=False):
     """`snap_angles` from given start states (`starts`: the up and down equilibria of the
     scene at alpha = 0 stacked on a leading axis, as `lax.map` of `initial_state_signed` makes
     them; a member whose `result` is not successful does not exist)."""

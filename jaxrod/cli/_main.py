@@ -488,7 +488,7 @@ def clearance_separation(n):
     return max(2, -(-n // 10))
 
 
-def _snap_arrays(scene, continue_after_snap=True):
+def _snap_arrays(scene, continue_after_snap=False):
     """What `jaxrod snap-angles` prints about one mesh, as a flat dict of arrays (one
     jittable function of the scene, exported by `_exported.call`): both paths' snap
     angles, their second critical points (`jaxrod.snap_routes`) and clearances."""
@@ -597,7 +597,7 @@ def _cmd_snap_angles(args):
 
     def run(scene):
         if not args.extrapolate:
-            return one_mesh(scene, True)
+            return one_mesh(scene, False)
         from .._misc import concurrently
 
         fine_scene = jr.refined_scene(scene)

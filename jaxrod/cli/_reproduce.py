@@ -137,7 +137,7 @@ def _loop_record(psi0_deg, gap, n, s0=0.02):
     snap: alpha in deg, fold height) and the jumps (fold height before -> after)."""
     import jaxrod as jr
 
-    r = jr.snap_angles(_scene(psi0_deg, gap, n, s0))
+    r = jr.snap_angles(_scene(psi0_deg, gap, n, s0), continue_after_snap=True)
     rec = {}
     for d, p in (("up", r.up), ("down", r.down)):
         br = p.branch

@@ -144,18 +144,61 @@ def pair_distances(x, min_separation: int = 2):
     return i, j, jnp.where(crosses, 0.0, dist), crosses
 
 
+def _component_distances(ax, ay, bx, by, cx, cy, dx, dy):
+    """Distance of segments [a, b] and [c, d] and whether they intersect, from the
+    coordinates as separate arrays (broadcast against each other): `point_segment_distance`
+    and `_intersect` written out per component, so that no axis of length 2 is reduced."""
+    def psd(px, py, ax, ay, bx, by):
+        ux, uy = bx - ax, by - ay
+        l2 = ux * ux + uy * uy
+        zero = l2 == 0
+        t = jnp.where(zero, 0.0, ((px - ax) * ux + (py - ay) * uy) / jnp.where(zero, 1.0, l2))
+        t = jnp.clip(t, 0.0, 1.0)
+        ex, ey = px - ax - t * ux, py - ay - t * uy
+        s2 = ex * ex + ey * ey
+        zero = s2 == 0  # a finite gradient at zero distance, as `safe_norm`'s
+        return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, s2)))
+
+    def cross(ux, uy, vx, vy):
+        return ux * vy - uy * vx
+
+    sab = jnp.sign(cross(bx - ax, by - ay, cx - ax, cy - ay)) * jnp.sign(cross(bx - ax, by - ay, dx - ax, dy - ay))
+    scd = jnp.sign(cross(dx - cx, dy - cy, ax - cx, ay - cy)) * jnp.sign(cross(dx - cx, dy - cy, bx - cx, by - cy))
+    boxes = ((jnp.minimum(ax, bx) <= jnp.maximum(cx, dx)) & (jnp.minimum(cx, dx) <= jnp.maximum(ax, bx))
+             & (jnp.minimum(ay, by) <= jnp.maximum(cy, dy)) & (jnp.minimum(cy, dy) <= jnp.maximum(ay, by)))
+    crosses = (sab <= 0) & (scd <= 0) & boxes
+    dist = jnp.minimum(jnp.minimum(psd(ax, ay, cx, cy, dx, dy), psd(bx, by, cx, cy, dx, dy)),
+                       jnp.minimum(psd(cx, cy, ax, ay, bx, by), psd(dx, dy, ax, ay, bx, by)))
+    return jnp.where(crosses, 0.0, dist), crosses
+
+
 def segment_distances(x, min_separation: int = 2):
     r"""`(clearance, crosses)` of node positions `x` (N+1, 2): the smallest distance
     between segments $i,j$ with $|i-j|\ge$ `min_separation` (an int, default 2: all
     non-neighbours), and whether any two of them intersect (touching included).
 
-    With fewer than `min_separation + 1` segments there is no pair: `(inf, False)`."""
-    _, _, d, crosses = pair_distances(x, min_separation)
-    c = jnp.min(d, initial=jnp.inf, axis=-1)
-    # XLA:CPU's row-wise min of a batch (several rows of ~1000 entries) can drop NaN and
-    # return the initial value: NaN is propagated explicitly
-    c = jnp.where(jnp.any(jnp.isnan(d), -1), jnp.nan, c)
-    return c, jnp.any(crosses, -1)
+    With fewer than `min_separation + 1` segments there is no pair: `(inf, False)`.
+
+    The pairs are evaluated as one $(n, n)$ array by broadcasting the segments' coordinates
+    against each other, all but $j-i\ge$ `min_separation` masked out: no gather of pair
+    indices, which XLA:CPU runs element by element; the same per-pair formulas as
+    `pair_distances`."""
+    n = x.shape[-2] - 1
+    idx = np.arange(n)
+    far = idx[None, :] - idx[:, None] >= min_separation
+    if not far.any():
+        return jnp.full(x.shape[:-2], jnp.inf, x.dtype), jnp.zeros(x.shape[:-2], bool)
+    X, Y = x[..., 0], x[..., 1]
+    row = lambda v: v[..., :, None]  # noqa: E731
+    col = lambda v: v[..., None, :]  # noqa: E731
+    d, crosses = _component_distances(row(X[..., :-1]), row(Y[..., :-1]), row(X[..., 1:]), row(Y[..., 1:]),
+                                      col(X[..., :-1]), col(Y[..., :-1]), col(X[..., 1:]), col(Y[..., 1:]))
+    d = jnp.where(far, d, jnp.inf)
+    crosses = crosses & far
+    c = jnp.min(d, axis=(-2, -1))
+    # XLA:CPU's min of a batch can drop NaN: NaN is propagated explicitly
+    c = jnp.where(jnp.any(jnp.isnan(d), axis=(-2, -1)), jnp.nan, c)
+    return c, jnp.any(crosses, axis=(-2, -1))
 
 
 def contact_pairs(scene):
@@ -419,11 +462,15 @@ def _boxes_apart(x, tol, min_separation):
     $|i-j|\ge$ `min_separation` of the nodes `x` have bounding boxes within `tol` of each
     other (then no two are within `tol`). NaN positions fail it."""
     n = x.shape[-2] - 1
-    i, j = np.triu_indices(n, k=min_separation)
     lo = jnp.minimum(x[:-1], x[1:]) - 0.5 * tol
     hi = jnp.maximum(x[:-1], x[1:]) + 0.5 * tol
-    apart = jnp.any((lo[i] > hi[j]) | (lo[j] > hi[i]), axis=-1)
-    return jnp.all(apart)
+    # every pair as one (n, n) comparison by broadcasting (symmetric in i and j), the pairs
+    # closer than `min_separation` along the strip masked out: no gather of pair indices,
+    # which XLA:CPU runs element by element (and, under `vmap`, member by member)
+    apart = jnp.any((lo[:, None, :] > hi[None, :, :]) | (lo[None, :, :] > hi[:, None, :]), axis=-1)
+    idx = np.arange(n)
+    near = np.abs(idx[:, None] - idx[None, :]) < min_separation
+    return jnp.all(apart | near)
 
 
 def self_intersects(theta, scene, tol=None, *, force=None, min_separation: int = 2):
@@ -445,8 +492,12 @@ def self_intersects(theta, scene, tol=None, *, force=None, min_separation: int =
         c, crosses = segment_distances(x, min_separation)
         return crosses | (c <= tol)
 
-    def boxes_then_distances(x, tol):
-        # the second screen only where the first fails (most states pass the first)
-        return run_if(~_boxes_apart(x, tol, min_separation), distances, no, (x, tol))
+    def boxes_overlap(x, tol):
+        return ~_boxes_apart(x, tol, min_separation)
 
-    return run_if(~monotone, boxes_then_distances, no, (x, jnp.asarray(tol, x.dtype)))
+    # the second screen only where the first fails (most states pass the first), the
+    # distances only where both fail: two loops of at most one pass one after the other, not
+    # one inside the other (nested, under `vmap`, they ran 10x slower than either alone)
+    tol = jnp.asarray(tol, x.dtype)
+    overlap = run_if(~monotone, boxes_overlap, no, (x, tol))
+    return run_if(overlap, distances, no, (x, tol))

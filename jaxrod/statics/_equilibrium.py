@@ -73,8 +73,8 @@ def float_scene(scene):
     return jtu.tree_map(lambda x: jnp.asarray(x, dtype) if eqx.is_array_like(x) else x, scene)
 
 
-def _grad_fn(scene):
-    d = discretize(scene)
+def _grad_fn(scene, d=None):
+    d = discretize(scene) if d is None else d
     return lambda t, m: lagrangian_gradient(t, m, scene, d)
 
 
@@ -90,146 +90,172 @@ MAX_ANGLE_STEP = 0.5  # rad
 _DELTAS = 10.0 ** np.arange(-8, 5)
 
 
-def _newton(scene, theta0, mu0, solver: Newton):
-    dtype = theta0.dtype
+def newton_start(theta0, mu0):
+    """The state of a Newton solve before its first iteration (see `newton_iteration`)."""
+    return dict(theta=theta0, mu=mu0, steps=jnp.zeros((), jnp.int32), done=jnp.zeros((), bool),
+                result=RESULTS.successful)
+
+
+def newton_iteration(scene, solver: Newton, c, d=None, count=False):
+    """One iteration of `solver` on `scene` from the Newton state `c` (`newton_start`):
+    the residual at the current iterate, and where it is above tolerance the (globalized)
+    Newton step. Returns the next state, whose `done` says the solve has ended and `result`
+    how (`successful` once converged, or why it stopped). With `count=True` also
+    $\nu(0)$ of the Hessian at the current iterate (the unstable count of a converged
+    state: the iterate is kept once converged).
+
+    `_newton` runs it in a loop of its own; a solver loop that runs many solves one after
+    another (the homotopy of `jaxrod.initial_state`) calls it once per pass of its own loop,
+    so that under `vmap` each member's solves follow each other without waiting, at every
+    solve, for the member with the most iterations."""
+    t, m = c["theta"], c["mu"]
+    dtype = t.dtype
     gtol = solver.gtol if solver.gtol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
-    d = discretize(scene)
-    grad_fn = _grad_fn(scene)
+    if d is None:
+        d = discretize(scene)
+    grad_fn = _grad_fn(scene, d)
     st = scene.strip
     rho = 100.0 * st.bending_stiffness / st.length**3
 
     def L(t, m):
         return lagrangian(t, m, scene, d)
 
-    def cond(c):
-        return ~c["done"]
+    g = grad_fn(t, m)
+    res = _residual(g, scene)
+    K_here = kkt.structured(t, m, scene, d) if count else None
 
-    def body(c):
-        t, m = c["theta"], c["mu"]
-        g = grad_fn(t, m)
-        res = _residual(g, scene)
-        def work():
-            K = kkt.structured(t, m, scene, d)
-            if solver.minimize:
-                # eigenvalues must exceed a small positive floor: a nearly singular
-                # Hessian (a critical state) would otherwise give a huge, useless step
-                scale = jnp.max(jnp.abs(K.diag))
-                floor = 1e-8 * scale
+    def work():
+        K = K_here if K_here is not None else kkt.structured(t, m, scene, d)
+        if solver.minimize:
+            # eigenvalues must exceed a small positive floor: a nearly singular
+            # Hessian (a critical state) would otherwise give a huge, useless step
+            scale = jnp.max(jnp.abs(K.diag))
+            floor = 1e-8 * scale
 
-                def ladder(K, scale, floor):
-                    # the smallest rung delta with nu(floor - delta) = 0 (else the last), one
-                    # rung after the other: the same counts as one 13-shift Sturm count, but
-                    # under `vmap` each rung is one small batched solve per member instead of a
-                    # 13x wider one (which went to `jaxrod.linalg.batched`'s slow pivoting scan)
-                    deltas = scale * _DELTAS.astype(dtype)
+            def ladder(K, scale, floor):
+                # the smallest rung delta with nu(floor - delta) = 0 (else the last): nu
+                # falls as delta grows, so a bisection over the rungs finds it in
+                # ceil(log2(13)) = 4 Sturm counts, the same for every member of a batch
+                # (a 13-shift count at once would be a 13x wider batched solve)
+                deltas = scale * _DELTAS.astype(dtype)
 
-                    def ok_at(j):
-                        return kkt.count_below(K, (floor - deltas[j])[None])[0] == 0
+                def ok_at(j):
+                    return kkt.count_below(K, (floor - deltas[j])[None])[0] == 0
 
-                    def more(c):
-                        return ~c[1] & (c[0] < deltas.shape[0] - 1)
+                def halve(_, lh):
+                    lo, hi = lh  # not ok at lo (or lo = -1); ok at hi (or hi = the last rung)
+                    mid = (lo + hi) // 2
+                    split = hi - lo > 1
+                    good = ok_at(jnp.maximum(mid, 0))
+                    return jnp.where(split & ~good, mid, lo), jnp.where(split & good, mid, hi)
 
-                    j, _ = lax.while_loop(more, lambda c: (c[0] + 1, ok_at(c[0] + 1)),
-                                          (jnp.zeros((), jnp.int32), ok_at(0)))
-                    return deltas[j]
+                last = deltas.shape[0] - 1
+                _, j = lax.fori_loop(0, int(np.ceil(np.log2(deltas.shape[0]))), halve,
+                                     (jnp.full((), -1, jnp.int32), jnp.full((), last, jnp.int32)))
+                return deltas[j]
 
-                # the ladder of shifts is only needed away from a local minimum; `run_if`, not
-                # `lax.cond`: under `vmap` a cond would run the 13-shift ladder for every member
-                # at every iteration (a batched tridiagonal solve per shift: it dominated the
-                # vmapped phase diagram)
-                is_min = kkt.count_below(K, jnp.full((1,), floor, dtype))[0] == 0
-                delta = run_if(~is_min, ladder, jnp.zeros((), dtype), (K, scale, floor))
-            else:
-                delta = jnp.zeros((), dtype)
-            p, q = kkt.solve(K, -g[0], -g[1], shift=-delta)
-            # cap the angle update at MAX_ANGLE_STEP rad (inactive near convergence)
-            cap = jnp.minimum(1.0, MAX_ANGLE_STEP / jnp.maximum(jnp.max(jnp.abs(p)), 1e-300))
-            cap = jnp.where(jnp.isfinite(cap), cap, 1.0)
-            if scene.contact is not None:
-                # with self-contact, no step may carry two parts of the strip through each other
-                cap = cap * step_bound(t, cap * p, scene, d)
-            p, q = cap * p, cap * q
-            if solver.minimize:
-                # The penalty rho is raised for this iteration where the Newton direction
-                # would not descend the merit: with phi = L + rho P, P = |grad_mu L|^2 / 2,
-                # the slope is L' + rho P' and P' ~ -|c|^2 < 0 along a Newton step, so
-                # rho >= 2 max(L', 0) / (-P') + rho_0 makes it <= -|L'| - rho_0 |P'|. Needed
-                # where the force changes a lot while the end condition is nearly met
-                # (the landing after a snap of a shallow arch: |q| ~ 1e2, |c| ~ 1e-3).
-                # Both slopes come from the gradient and the Hessian at hand:
-                # L' = g . (p, q), P' = g_mu . (K (p, q))_mu.
-                slope_l = jnp.dot(g[0], p) + jnp.dot(g[1], q)
-                slope_p = jnp.dot(g[1], kkt.matvec(K, p, q)[1])
-                need = 2.0 * jnp.maximum(slope_l, 0.0) / jnp.maximum(-slope_p, jnp.finfo(dtype).tiny) + rho
-                rho_it = jnp.where(slope_p < 0.0, jnp.maximum(rho, need), rho)
-                rho_it = jnp.where(jnp.isfinite(rho_it), rho_it, rho)
-                f0 = L(t, m) + rho_it * 0.5 * jnp.sum(g[1] ** 2)
-                slope = jnp.minimum(slope_l + rho_it * slope_p, 0.0)
+            # the ladder of shifts is only needed away from a local minimum; `run_if`, not
+            # `lax.cond`: under `vmap` a cond would run the 13-shift ladder for every member
+            # at every iteration (a batched tridiagonal solve per shift: it dominated the
+            # vmapped phase diagram)
+            is_min = kkt.count_below(K, jnp.full((1,), floor, dtype))[0] == 0
+            delta = run_if(~is_min, ladder, jnp.zeros((), dtype), (K, scale, floor))
+        else:
+            delta = jnp.zeros((), dtype)
+        p, q = kkt.solve(K, -g[0], -g[1], shift=-delta)
+        # cap the angle update at MAX_ANGLE_STEP rad (inactive near convergence)
+        cap = jnp.minimum(1.0, MAX_ANGLE_STEP / jnp.maximum(jnp.max(jnp.abs(p)), 1e-300))
+        cap = jnp.where(jnp.isfinite(cap), cap, 1.0)
+        if scene.contact is not None:
+            # with self-contact, no step may carry two parts of the strip through each other
+            cap = cap * step_bound(t, cap * p, scene, d)
+        p, q = cap * p, cap * q
+        if solver.minimize:
+            # The penalty rho is raised for this iteration where the Newton direction
+            # would not descend the merit: with phi = L + rho P, P = |grad_mu L|^2 / 2,
+            # the slope is L' + rho P' and P' ~ -|c|^2 < 0 along a Newton step, so
+            # rho >= 2 max(L', 0) / (-P') + rho_0 makes it <= -|L'| - rho_0 |P'|. Needed
+            # where the force changes a lot while the end condition is nearly met
+            # (the landing after a snap of a shallow arch: |q| ~ 1e2, |c| ~ 1e-3).
+            # Both slopes come from the gradient and the Hessian at hand:
+            # L' = g . (p, q), P' = g_mu . (K (p, q))_mu.
+            slope_l = jnp.dot(g[0], p) + jnp.dot(g[1], q)
+            slope_p = jnp.dot(g[1], kkt.matvec(K, p, q)[1])
+            need = 2.0 * jnp.maximum(slope_l, 0.0) / jnp.maximum(-slope_p, jnp.finfo(dtype).tiny) + rho
+            rho_it = jnp.where(slope_p < 0.0, jnp.maximum(rho, need), rho)
+            rho_it = jnp.where(jnp.isfinite(rho_it), rho_it, rho)
+            f0 = L(t, m) + rho_it * 0.5 * jnp.sum(g[1] ** 2)
+            slope = jnp.minimum(slope_l + rho_it * slope_p, 0.0)
 
-                def accept(step):
-                    # Armijo on the merit; the full step is also taken where it halves the
-                    # residual, descent or not (one gradient serves both tests)
-                    ts, ms = t + step * p, m + step * q
-                    gs = grad_fn(ts, ms)
-                    f = L(ts, ms) + rho_it * 0.5 * jnp.sum(gs[1] ** 2)
-                    armijo = jnp.isfinite(f) & (f <= f0 + 1e-4 * step * slope)
-                    res_s = _residual(gs, scene)
-                    halves = (step == 1.0) & (res_s <= 0.5 * res) & jnp.isfinite(res_s)
-                    return armijo | halves
+            def accept(step):
+                # Armijo on the merit; the full step is also taken where it halves the
+                # residual, descent or not (one gradient serves both tests)
+                ts, ms = t + step * p, m + step * q
+                gs = grad_fn(ts, ms)
+                f = L(ts, ms) + rho_it * 0.5 * jnp.sum(gs[1] ** 2)
+                armijo = jnp.isfinite(f) & (f <= f0 + 1e-4 * step * slope)
+                res_s = _residual(gs, scene)
+                halves = (step == 1.0) & (res_s <= 0.5 * res) & jnp.isfinite(res_s)
+                return armijo | halves
 
-                # The test is carried as a flag, never re-evaluated in `ls_cond`: under `vmap`
-                # the loop condition is recomputed inside the body, and a differently fused
-                # copy of the merit can round the other way when f == f0 (a converged
-                # iterate), so the loop would run forever without updating that member. The
-                # first pass tries the full step: one call site of the trial
-                def ls_cond(s):
-                    step, k, ok = s
-                    return (~ok) & (k < solver.max_backtracks)
+            # The test is carried as a flag, never re-evaluated in `ls_cond`: under `vmap`
+            # the loop condition is recomputed inside the body, and a differently fused
+            # copy of the merit can round the other way when f == f0 (a converged
+            # iterate), so the loop would run forever without updating that member. The
+            # first pass tries the full step: one call site of the trial
+            def ls_cond(s):
+                step, k, ok = s
+                return (~ok) & (k < solver.max_backtracks)
 
-                def ls_body(s):
-                    step, k, _ = s
-                    return 0.5 * step, k + 1, accept(0.5 * step)
+            def ls_body(s):
+                step, k, _ = s
+                return 0.5 * step, k + 1, accept(0.5 * step)
 
-                step, _, ok = lax.while_loop(ls_cond, ls_body, (jnp.full((), 2.0, dtype), jnp.full((), -1, jnp.int32),
-                                                                jnp.zeros((), bool)))
-                ls_failed = ~ok
-                t_new, m_upd = t + step * p, m + step * q
-            else:
-                ls_failed = jnp.zeros((), bool)
-                t_new, m_upd = t + p, m + q
-            return t_new, m_upd, ls_failed
+            step, _, ok = lax.while_loop(ls_cond, ls_body, (jnp.full((), 2.0, dtype), jnp.full((), -1, jnp.int32),
+                                                            jnp.zeros((), bool)))
+            ls_failed = ~ok
+            t_new, m_upd = t + step * p, m + step * q
+        else:
+            ls_failed = jnp.zeros((), bool)
+            t_new, m_upd = t + p, m + q
+        return t_new, m_upd, ls_failed
 
-        # a converged iterate skips the (discarded) Hessian assembly and step
-        t_new, m_upd, ls_failed = lax.cond(res <= gtol, lambda: (t, m, jnp.zeros((), bool)), work)
-        converged = res <= gtol
-        finite = jnp.all(jnp.isfinite(t_new)) & jnp.all(jnp.isfinite(m_upd)) & jnp.isfinite(res)
-        steps = c["steps"] + 1
-        result = RESULTS.where(
-            converged,
-            RESULTS.successful,
+    # a converged iterate skips the (discarded) Hessian assembly and step
+    t_new, m_upd, ls_failed = lax.cond(res <= gtol, lambda: (t, m, jnp.zeros((), bool)), work)
+    converged = res <= gtol
+    finite = jnp.all(jnp.isfinite(t_new)) & jnp.all(jnp.isfinite(m_upd)) & jnp.isfinite(res)
+    steps = c["steps"] + 1
+    result = RESULTS.where(
+        converged,
+        RESULTS.successful,
+        RESULTS.where(
+            ~finite,
+            RESULTS.nonfinite,
             RESULTS.where(
-                ~finite,
-                RESULTS.nonfinite,
-                RESULTS.where(
-                    ls_failed,
-                    RESULTS.line_search_failed,
-                    RESULTS.where(steps >= solver.max_steps, RESULTS.max_steps_reached, RESULTS.successful),
-                ),
+                ls_failed,
+                RESULTS.line_search_failed,
+                RESULTS.where(steps >= solver.max_steps, RESULTS.max_steps_reached, RESULTS.successful),
             ),
-        )
-        stop = converged | ~finite | ls_failed | (steps >= solver.max_steps)
-        keep = converged | ~finite
-        return dict(
-            theta=jnp.where(keep, t, t_new),
-            mu=jnp.where(keep, m, m_upd),
-            steps=jnp.where(converged, c["steps"], steps),
-            done=stop,
-            result=result,
-        )
+        ),
+    )
+    stop = converged | ~finite | ls_failed | (steps >= solver.max_steps)
+    keep = converged | ~finite
+    out = dict(
+        theta=jnp.where(keep, t, t_new),
+        mu=jnp.where(keep, m, m_upd),
+        steps=jnp.where(converged, c["steps"], steps),
+        done=stop,
+        result=result,
+    )
+    if count:
+        return out, kkt.count_below(K_here, jnp.zeros(1, dtype))[0]
+    return out
 
-    init = dict(theta=theta0, mu=mu0, steps=jnp.zeros((), jnp.int32), done=jnp.zeros((), bool),
-                result=RESULTS.successful)
-    out = lax.while_loop(cond, body, init)
+
+def _newton(scene, theta0, mu0, solver: Newton):
+    d = discretize(scene)
+    out = lax.while_loop(lambda c: ~c["done"], lambda c: newton_iteration(scene, solver, c, d),
+                         newton_start(theta0, mu0))
     return out["theta"], out["mu"], out["result"], out["steps"]
 
 

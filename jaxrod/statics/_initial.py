@@ -42,7 +42,7 @@ from jax import lax
 
 from ..energy.geometry import discretize, scene_dtype
 from ..energy.lagrangian import positions
-from ._equilibrium import Newton, _implicit, float_scene, solve_unflagged, flag_contact
+from ._equilibrium import Newton, _implicit, float_scene, newton_iteration, newton_start, solve_unflagged, flag_contact
 from .._misc import check_int, jit
 from ..results import RESULTS
 from ._solution import Equilibrium
@@ -162,9 +162,12 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2), warm=None):
     otherwise the homotopy runs as without it.
 
     Every Newton solve of the homotopy runs at one call site, in one loop whose phase picks
-    the scene and the guess: one compiled copy of the Newton solve instead of one per phase
-    (a copy is about 130 of the 1211 fused XLA kernels of `snap_angles`, whose compile time follows
-    their number).
+    the scene and the guess: one compiled copy of the Newton iteration instead of one per
+    phase. Each pass of the loop is one Newton iteration (`newton_iteration`); a pass whose
+    iteration ends its solve also takes the phase's decision and starts the next solve. Under
+    `vmap` every member thus runs its own sequence of solves, and the batch costs the most
+    Newton iterations any member needs, not, solve by solve, the most any member needs for
+    that solve.
 
     Returns `(eq, found, warmed)`: the polished equilibrium (scene `target`), whether a path
     (or the warm start) was valid, and whether the warm start was."""
@@ -185,13 +188,23 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2), warm=None):
         deformed = eqx.filter(_deformed(_with_gap(target, u), uc, ua), eqx.is_array)
         return eqx.combine(_tree_where((phase == _FINAL) | (phase == _WARM), arrays, deformed), static)
 
-    def body(c):
-        phase, k, step, t, m, ok, found, t0, m0, ok0, dt, dm, out = c
-        sc = scene_at(phase, kinds[jnp.minimum(k, kinds.shape[0] - 1)], step)
-        # a path step starts from the secant prediction (the last step's change added again)
+    def start_of(phase, t, m, dt, dm):
+        # where the solve of a phase starts: a path step from the secant prediction (the last
+        # step's change added again)
         t_in = jnp.where(phase == _FLAT, guess, jnp.where(phase == _PATH, t + secant * dt + seed, t))
         m_in = jnp.where(phase == _FLAT, jnp.zeros_like(m), jnp.where(phase == _PATH, m + secant * dm, m))
-        eq = solve_unflagged(sc, t_in, m_in, solver)
+        return newton_start(t_in, m_in)
+
+    def body(c):
+        c, nw = c[:13], c[13]
+        phase, k, step, t, m, ok, found, t0, m0, ok0, dt, dm, out = c
+        sc = scene_at(phase, kinds[jnp.minimum(k, kinds.shape[0] - 1)], step)
+        nw, nneg = newton_iteration(sc, solver, nw, count=True)
+        # the solve as `solve_unflagged` reports it (a converged iterate is kept, so `nneg`,
+        # counted at the iterate, is its unstable count)
+        result = RESULTS.where((nw["result"] == RESULTS.successful) & (nneg > 0), RESULTS.converged_to_saddle,
+                               nw["result"])
+        eq = Equilibrium(nw["theta"], nw["mu"], result, nw["steps"], nneg, sc)
         good = eq.converged & eq.stable & (sgn * _fold_height(eq.theta, eq.force, sc) > 0)
         no_dt, no_dm = jnp.zeros_like(dt), jnp.zeros_like(dm)
         # flat start: valid -> the first path from it; else nothing to deform: polish
@@ -225,9 +238,13 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2), warm=None):
             out = _tree_where((phase == _WARM) & warm_ok, eqx.filter(eq, eqx.is_array), out)
         head = _tree_where(phase == _FINAL, (_DONE,) + c[1:12], head)
         out = _tree_where(phase == _FINAL, eqx.filter(eq, eqx.is_array), out)
-        new = head + (out,)
+        decided = head + (out,)
+        # a solve that has not ended goes on in the next pass; one that has ended hands over
+        # to the next phase, whose solve starts at once
+        new = _tree_where(nw["done"], decided, c)
+        nw = _tree_where(nw["done"], start_of(new[0], new[3], new[4], new[10], new[11]), nw)
         # finished members of a batch (under `vmap`) keep their state
-        return _tree_where(phase == _DONE, c, new)
+        return _tree_where(phase == _DONE, c + (nw,), new + (nw,))
 
     shapes, eq_static = eqx.partition(jax.eval_shape(lambda: solve_unflagged(target, guess, None, solver)),
                                       lambda x: isinstance(x, jax.ShapeDtypeStruct))
@@ -239,11 +256,11 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2), warm=None):
         t_w, m_w, ok_w = warm
         t_init, m_init = jnp.where(ok_w, t_w, t_init), jnp.where(ok_w, m_w, m_init)
         phase0 = jnp.where(ok_w, _WARM, _FLAT).astype(jnp.int32)
-    c = lax.while_loop(lambda c: c[0] != _DONE, body,
-                       (phase0, i0, i0, t_init, m_init, f0, f0, guess, jnp.zeros(2, dtype), f0, jnp.zeros_like(t_init),
-                        jnp.zeros_like(m_init), out0))
+    c0 = (phase0, i0, i0, t_init, m_init, f0, f0, guess, jnp.zeros(2, dtype), f0, jnp.zeros_like(t_init),
+          jnp.zeros_like(m_init), out0)
+    c = lax.while_loop(lambda c: c[0] != _DONE, body, c0 + (start_of(phase0, t_init, m_init, c0[10], c0[11]),))
     # a kept warm start ends with `found` and not `ok`; a valid path ends with both
-    return eqx.combine(c[-1], eq_static), c[6], c[6] & ~c[5]
+    return eqx.combine(c[12], eq_static), c[6], c[6] & ~c[5]
 
 
 def _finite(tree):
