@@ -330,35 +330,56 @@ def jit(fun, *, dynamics: bool = False):
     the mode's first tier) and `.prepare(*args, **kwargs)`, which traces, lowers and compiles
     the top-level program for those arguments without running it, so that a worker thread
     can prepare one program while the caller compiles another (`with_program_beside`)."""
-    plain = eqx.filter_jit(fun)
-    variants = {}
-    programs = _Programs(plain, dynamics)
+    return _Entry(fun, dynamics)
 
-    def tiered():
-        return _top_level() and jax.default_backend() == "cpu"
 
-    @functools.wraps(fun)
-    def wrapper(*args, **kwargs):
-        if not tiered():
-            return plain(*args, **kwargs)
-        out = programs(args, kwargs, compile_mode())
-        return plain(*args, **kwargs) if out is _MISMATCH else out
+def _tiered():
+    return _top_level() and jax.default_backend() == "cpu"
 
-    def lower(*args, **kwargs):
+
+class _Entry:
+    """What `jit` returns: a callable with `.lower`, `.prepare` and `.programs` as
+    methods and a property of its class, not as attributes of the instance. JAX's
+    transformations copy a function's `__dict__` onto what they return (`functools.wraps`),
+    so an instance attribute `lower` would hide the `.lower` of `jax.jit(jax.vmap(entry))`
+    behind the unbatched entry's own."""
+
+    def __init__(self, fun, dynamics):
+        functools.update_wrapper(self, fun)
+        self._plain = eqx.filter_jit(fun)
+        self._fun = fun
+        self._dynamics = dynamics
+        self._variants = {}
+        self._programs = _Programs(self._plain, dynamics)
+
+    def __call__(self, *args, **kwargs):
+        if not _tiered():
+            return self._plain(*args, **kwargs)
+        out = self._programs(args, kwargs, compile_mode())
+        return self._plain(*args, **kwargs) if out is _MISMATCH else out
+
+    @property
+    def programs(self):
+        """The per-signature program table (`_Programs`)."""
+        return self._programs
+
+    def lower(self, *args, **kwargs):
+        """JAX's ahead-of-time lowering, with the options of the compile mode's first tier."""
         mode = compile_mode()
-        opts = compiler_options(dynamics, mode) if _top_level() else {}
+        opts = compiler_options(self._dynamics, mode) if _top_level() else {}
         if not opts:
-            return plain.lower(*args, **kwargs)
-        if mode not in variants:
-            variants[mode] = eqx.filter_jit(fun, compiler_options=opts)
-        return variants[mode].lower(*args, **kwargs)
+            return self._plain.lower(*args, **kwargs)
+        if mode not in self._variants:
+            self._variants[mode] = eqx.filter_jit(self._fun, compiler_options=opts)
+        return self._variants[mode].lower(*args, **kwargs)
 
-    def prepare(*args, **kwargs):
-        if tiered():
-            programs.entry(args, kwargs, compile_mode())
+    def prepare(self, *args, **kwargs):
+        """Trace, lower and compile the top-level program for these arguments, without running it."""
+        if _tiered():
+            self._programs.entry(args, kwargs, compile_mode())
 
-    wrapper.lower, wrapper.prepare, wrapper.programs = lower, prepare, programs
-    return wrapper
+    def __repr__(self):
+        return f"<jaxrod entry point {getattr(self, '__qualname__', self._fun)}>"
 
 
 def _placeholder(x):
