@@ -36,7 +36,7 @@ from ..energy.geometry import discretize
 from ..energy.contact import self_intersects
 from ..energy.lagrangian import lagrangian_gradient, positions
 from ..statics import float_scene
-from .._misc import check_bool, check_int, check_number, check_sign, is_concrete, jit
+from .._misc import check_bool, check_int, check_number, check_sign, is_concrete, jit, run_if
 from ..results import RESULTS
 
 
@@ -177,7 +177,12 @@ def branch_crossings(theta, force, count, scene):
     """(M,) whether each of the first `count` states of `theta` (M, N) passes through itself
     (`jaxrod.self_intersects`; False past `count`): one O(N^2) check per computed point."""
     def body(k, out):
-        return out.at[k].set(self_intersects(theta[k], scene, force=force[k]))
+        # under `vmap` the loop runs to the largest count of the batch: a member past its own
+        # count checks its first point instead of an unfilled (NaN) row, whose positions would
+        # send the whole batch down the screens' slowest path
+        valid = k < count
+        j = jnp.where(valid, k, 0)
+        return out.at[k].set(valid & self_intersects(theta[j], scene, force=force[j]))
 
     return lax.fori_loop(0, count, body, jnp.zeros(theta.shape[0], bool))
 
@@ -201,31 +206,57 @@ def _pieces(scene, parameter):
     return F, F_lam, K
 
 
+def _bordered_columns(Kmat, Flam, c, clam, Rt, Rm, Rs):
+    """Solve [[K, F_lam], [(c, 0)^T, clam]] (dt, dm, dlam) = (r_t, r_m, r_s) for k right-hand
+    sides at once (`Rt` (N, k), `Rm` (2, k), `Rs` (k,)), with one step of iterative
+    refinement: two structured solves of k + 1 columns in all (`kkt.solve_columns`), the
+    column $K^{-1}F_\\lambda$ of the first reused by the second. Returns `(Dt, Dm, Dl, nu)`,
+    `nu` the unstable count $\nu(0)$ of `Kmat`."""
+    k = Rt.shape[1]
+    A, B, nu = kkt.solve_columns(Kmat, jnp.concatenate([Rt, Flam[0][:, None]], axis=1),
+                                 jnp.concatenate([Rm, Flam[1][:, None]], axis=1))
+    bt, bm = A[:, k], B[:, k]
+    den = clam - jnp.dot(c, bt)
+
+    def finish(At, Am, rs):
+        dl = (rs - c @ At) / den
+        return At - bt[:, None] * dl, Am - bm[:, None] * dl, dl
+
+    Dt, Dm, Dl = finish(A[:, :k], B[:, :k], Rs)
+    kt, km = kkt.matvec_columns(Kmat, Dt, Dm)
+    Et, Em, El = Rt - (kt + Flam[0][:, None] * Dl), Rm - (km + Flam[1][:, None] * Dl), Rs - (c @ Dt + clam * Dl)
+    A2, B2, _ = kkt.solve_columns(Kmat, Et, Em)
+    et, em, el = finish(A2, B2, El)
+    return Dt + et, Dm + em, Dl + el, nu
+
+
 def _bordered_solve(Kmat, Flam, c, clam, r_t, r_m, r_s):
     """Solve [[K, F_lam], [(c, 0)^T, clam]] (dt, dm, dlam) = (r_t, r_m, r_s) with one
-    step of iterative refinement."""
+    step of iterative refinement (`_bordered_columns` with one column)."""
+    Dt, Dm, Dl, _ = _bordered_columns(Kmat, Flam, c, clam, r_t[:, None], r_m[:, None], jnp.reshape(r_s, (1,)))
+    return Dt[:, 0], Dm[:, 0], Dl[0]
 
-    def once(rt, rm, rs):
-        at, am = kkt.solve(Kmat, rt, rm)
-        bt, bm = kkt.solve(Kmat, Flam[0], Flam[1])
-        dl = (rs - jnp.dot(c, at)) / (clam - jnp.dot(c, bt))
-        return at - bt * dl, am - bm * dl, dl
 
-    def apply(dt, dm, dl):
-        kt, km = kkt.matvec(Kmat, dt, dm)
-        return kt + Flam[0] * dl, km + Flam[1] * dl, jnp.dot(c, dt) + clam * dl
-
-    dt, dm, dl = once(r_t, r_m, r_s)
-    at, am, al = apply(dt, dm, dl)
-    et, em, el = once(r_t - at, r_m - am, r_s - al)
-    return dt + et, dm + em, dl + el
+def _unit_tangent(zt, zm, zl, w):
+    nrm = jnp.sqrt(jnp.sum(w * zt**2) + zl**2)
+    return zt / nrm, zm / nrm, zl / nrm
 
 
 def _tangent(Kmat, Flam, c, clam, w):
     zt, zm, zl = _bordered_solve(Kmat, Flam, c, clam, jnp.zeros_like(c), jnp.zeros_like(Flam[1]),
                                  jnp.ones_like(clam))
-    nrm = jnp.sqrt(jnp.sum(w * zt**2) + zl**2)
-    return zt / nrm, zm / nrm, zl / nrm
+    return _unit_tangent(zt, zm, zl, w)
+
+
+def _step_and_tangent(Kmat, Flam, c, clam, g, rs, w):
+    """The corrector's Newton step for the residual `(g, rs)` and the unit tangent of the
+    bordered matrix (right-hand side (0, 0, 1)), as two columns of one bordered solve, and
+    $\nu(0)$ of `Kmat`: `((dt, dm, dl), (nt, nm, nl), nu)`."""
+    Rt = jnp.stack([-g[0], jnp.zeros_like(g[0])], axis=1)
+    Rm = jnp.stack([-g[1], jnp.zeros_like(g[1])], axis=1)
+    Rs = jnp.stack([-rs, jnp.ones_like(rs)])
+    Dt, Dm, Dl, nu = _bordered_columns(Kmat, Flam, c, clam, Rt, Rm, Rs)
+    return (Dt[:, 0], Dm[:, 0], Dl[0]), _unit_tangent(Dt[:, 1], Dm[:, 1], Dl[1], w), nu
 
 
 def _residual_norm(g, scene):
@@ -367,40 +398,74 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
         fold_height=jnp.full((M,), jnp.nan, dtype).at[0].set(fh(t0, m0, lam0)),
         ds=jnp.zeros((M,), dtype),
     )
-    init = dict(buf=buf, i=jnp.ones((), jnp.int32), t=t0, m=m0, lam=lam0, tau=tau0,
-                ds=jnp.asarray(settings.ds, dtype), stop=jnp.full((), -1, jnp.int32))
+    steps = settings.steps_for(scene)
+    ds0 = jnp.asarray(settings.ds, dtype)
+
+    def predicted(t, m, lam, tau, ds):
+        return t + ds * tau[0], m + ds * tau[1], lam + ds * tau[2]
+
+    # One pass of the loop is one corrector iteration (as `corrector`: the residual at the
+    # iterate, and where it is above tolerance the Newton step on the bordered system); the
+    # pass whose iteration decides the step (converged, or given up after `steps` iterations
+    # or at a non-finite iterate) also records the point, takes the new tangent and unstable
+    # count from the same bordered solve (two more columns of it) and predicts the next
+    # point. Under `vmap` each member thus goes from step to step on its own, and a batch
+    # costs the most corrector iterations any member needs in all, not, step by step, the
+    # most any member needs for that step.
+    init = dict(buf=buf, i=jnp.ones((), jnp.int32), t=t0, m=m0, lam=lam0, tau=tau0, ds=ds0,
+                stop=jnp.full((), -1, jnp.int32), x=predicted(t0, m0, lam0, tau0, ds0), k=jnp.zeros((), jnp.int32))
 
     def cond(c):
         return (c["stop"] < 0) & (c["i"] < M)
 
     def body(c):
         t, m, lam, tau, ds = c["t"], c["m"], c["lam"], c["tau"], c["ds"]
-        tn, mn, ln, conv, k, (Kn, Flam_n) = corrector(scene, parameter, (t, m), lam, tau, ds,
-                                                     settings.steps_for(scene), tol, with_jacobian=True)
+        tp, mp, lp = predicted(t, m, lam, tau, ds)
+        cw = w * tau[0]
+        xt, xm, xl = c["x"]
+        g = F(xt, xm, xl)
+        rs = jnp.dot(cw, xt - tp) + tau[2] * (xl - lp)
+        Kn, Flam_n = Kf(xt, xm, xl), F_lam(xt, xm, xl)
+        (dt, dm, dl), (nt, nm, nl), nu = _step_and_tangent(Kn, Flam_n, cw, tau[2], g, rs, w)
+        converged = (_residual_norm(g, scene) <= tol) & (jnp.abs(rs) <= tol)
+        k = c["k"] + 1
+        tn, mn, ln = (jnp.where(converged, xt, xt + dt), jnp.where(converged, xm, xm + dm),
+                      jnp.where(converged, xl, xl + dl))
+        finite = jnp.all(jnp.isfinite(tn)) & jnp.isfinite(ln)
+        decided = converged | (k >= steps) | ~finite
+        # a correction longer than the step itself left the branch for another one (at Psi0 =
+        # 60 deg, G/L = 0.075 with contact, a step of 0.025 landed 0.42 away, on an unstable
+        # branch 18 deg back): not converged, so the step is halved
+        far = jnp.sqrt(jnp.sum(w * (tn - tp) ** 2) + (ln - lp) ** 2) > jnp.abs(ds)
+        conv = converged & ~far
         if scene.contact is not None:
             # with self-contact a step must not carry the strip through itself (a penalty
             # cannot undo a crossing): such a point is rejected and the step halved
-            conv = conv & ~self_intersects(tn, parameter.set(scene, ln), force=mn)
-        # K and F_lam at the corrected point: the corrector's last evaluation, where it converged
-        nt, nm, nl = _tangent(Kn, Flam_n, w * tau[0], tau[2], w)
-        nu = kkt.count_below(Kn, jnp.zeros(1, dtype))[0]
+            conv = conv & ~run_if(conv, lambda a, b, c_: self_intersects(a, parameter.set(scene, b), force=c_),
+                                  jnp.zeros((), bool), (tn, ln, mn))
+        accept = decided & conv
         i = c["i"]
-        b = c["buf"]
-        # row i is written whether or not the point was accepted (a rejected point leaves it
-        # as it was): one row per step, never a select over the whole buffer
+        buf = c["buf"]
+        # row i is written whether or not a point was accepted (otherwise it keeps what it
+        # held): one row per pass, never a select over the whole buffer
         row = dict(lam=ln, theta=tn, force=mn, tau_lam=nl, num_unstable=nu, fold_height=fh(tn, mn, ln), ds=ds)
-        b = {k: b[k].at[i].set(jnp.where(conv, row[k], b[k][i])) for k in b}
-        i_new = jnp.where(conv, i + 1, i)
+        buf = {key: buf[key].at[i].set(jnp.where(accept, row[key], buf[key][i])) for key in buf}
+        i_new = jnp.where(accept, i + 1, i)
         grow = jnp.where(k <= 3, 1.5, 1.0)
-        ds_new = jnp.where(conv, jnp.minimum(ds * grow, settings.ds_max), 0.5 * ds)
-        out_of_bounds = conv & ((ln < lo) | (ln > hi))
-        changed = conv & (nu != nu0) & stop_on_instability
-        too_small = ds_new < settings.ds_min
+        ds_new = jnp.where(decided, jnp.where(conv, jnp.minimum(ds * grow, settings.ds_max), 0.5 * ds), ds)
+        out_of_bounds = accept & ((ln < lo) | (ln > hi))
+        changed = accept & (nu != nu0) & stop_on_instability
+        too_small = decided & (ds_new < settings.ds_min)
         stop = jnp.where(out_of_bounds, 1, jnp.where(changed, 2, jnp.where(too_small, 3, -1)))
         stop = jnp.where((stop < 0) & (i_new >= M), 0, stop).astype(jnp.int32)
-        keep = lambda new, old: jnp.where(conv, new, old)  # noqa: E731
-        return dict(buf=b, i=i_new, t=keep(tn, t), m=keep(mn, m), lam=keep(ln, lam),
-                    tau=jax.tree.map(keep, (nt, nm, nl), tau), ds=ds_new, stop=stop)
+        keep = lambda new, old: jnp.where(accept, new, old)  # noqa: E731
+        t, m, lam = keep(tn, t), keep(mn, m), keep(ln, lam)
+        tau = jax.tree.map(keep, (nt, nm, nl), tau)
+        # the next iterate: the prediction of the next step once this one is decided
+        nxt = predicted(t, m, lam, tau, ds_new)
+        x = jax.tree.map(lambda p_, x_: jnp.where(decided, p_, x_), nxt, (tn, mn, ln))
+        return dict(buf=buf, i=i_new, t=t, m=m, lam=lam, tau=tau, ds=ds_new, stop=stop, x=x,
+                    k=jnp.where(decided, 0, k))
 
     out = lax.while_loop(cond, body, init)
     b = out["buf"]

@@ -88,6 +88,8 @@ sums); the Cartesian Hessian is assembled from each pair's $6\times6$ Hessian
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -457,20 +459,45 @@ def clearance(theta, scene, *, force=None, min_separation: int = 2):
     return segment_distances(_nodes(theta, scene, force), min_separation)[0]
 
 
+def _box_overlaps(x, tol, min_separation):
+    r"""(n, n) mask of the segment pairs $j-i\ge$ `min_separation` of the nodes `x` whose
+    axis-aligned bounding boxes come within `tol` of each other: one comparison of every pair
+    by broadcasting (no gather of pair indices, which XLA:CPU runs element by element).
+    NaN positions overlap everything."""
+    n = x.shape[-2] - 1
+    lo = jnp.minimum(x[:-1], x[1:]) - 0.5 * tol
+    hi = jnp.maximum(x[:-1], x[1:]) + 0.5 * tol
+    apart = jnp.any((lo[:, None, :] > hi[None, :, :]) | (lo[None, :, :] > hi[:, None, :]), axis=-1)
+    idx = np.arange(n)
+    return ~apart & (idx[None, :] - idx[:, None] >= min_separation)
+
+
 def _boxes_apart(x, tol, min_separation):
     r"""The $O(N^2)$ comparison screen of the module docstring: True where no two segments
     $|i-j|\ge$ `min_separation` of the nodes `x` have bounding boxes within `tol` of each
     other (then no two are within `tol`). NaN positions fail it."""
+    return ~jnp.any(_box_overlaps(x, tol, min_separation))
+
+
+OVERLAP_PAIRS = 64
+"""Segment pairs with overlapping bounding boxes that `self_intersects` measures one by one
+(a state with more is measured pair by pair in full)."""
+
+
+def _overlapping_pairs_touch(x, tol, min_separation):
+    """`(near, many)`: whether one of the first `OVERLAP_PAIRS` segment pairs of the nodes
+    `x` whose bounding boxes (grown by `tol`) overlap is within `tol` or crosses, and whether
+    more pairs than that overlap. Pairs whose boxes are apart are farther than `tol`."""
     n = x.shape[-2] - 1
-    lo = jnp.minimum(x[:-1], x[1:]) - 0.5 * tol
-    hi = jnp.maximum(x[:-1], x[1:]) + 0.5 * tol
-    # every pair as one (n, n) comparison by broadcasting (symmetric in i and j), the pairs
-    # closer than `min_separation` along the strip masked out: no gather of pair indices,
-    # which XLA:CPU runs element by element (and, under `vmap`, member by member)
-    apart = jnp.any((lo[:, None, :] > hi[None, :, :]) | (lo[None, :, :] > hi[:, None, :]), axis=-1)
-    idx = np.arange(n)
-    near = np.abs(idx[:, None] - idx[None, :]) < min_separation
-    return jnp.all(apart | near)
+    overlap = _box_overlaps(x, tol, min_separation).reshape(-1)
+    count = jnp.sum(overlap)
+    k = min(OVERLAP_PAIRS, n * n)
+    (flat,) = jnp.nonzero(overlap, size=k, fill_value=0)
+    i, j = flat // n, flat % n
+    d, crosses = _component_distances(x[i, 0], x[i, 1], x[i + 1, 0], x[i + 1, 1],
+                                      x[j, 0], x[j, 1], x[j + 1, 0], x[j + 1, 1])
+    valid = jnp.arange(k) < count
+    return jnp.any(valid & (crosses | (d <= tol))), count > k
 
 
 def self_intersects(theta, scene, tol=None, *, force=None, min_separation: int = 2):
@@ -492,12 +519,12 @@ def self_intersects(theta, scene, tol=None, *, force=None, min_separation: int =
         c, crosses = segment_distances(x, min_separation)
         return crosses | (c <= tol)
 
-    def boxes_overlap(x, tol):
-        return ~_boxes_apart(x, tol, min_separation)
-
-    # the second screen only where the first fails (most states pass the first), the
-    # distances only where both fail: two loops of at most one pass one after the other, not
-    # one inside the other (nested, under `vmap`, they ran 10x slower than either alone)
+    # the second screen only where the first fails (most states pass the first): the pairs
+    # whose bounding boxes come within `tol`, of which the first `OVERLAP_PAIRS` are measured
+    # (only they can be within `tol`); every pair only where more overlap. Loops of at most
+    # one pass one after the other, not one inside the other (nested, under `vmap`, they ran
+    # 10x slower than either alone)
     tol = jnp.asarray(tol, x.dtype)
-    overlap = run_if(~monotone, boxes_overlap, no, (x, tol))
-    return run_if(overlap, distances, no, (x, tol))
+    near, many = run_if(~monotone, functools.partial(_overlapping_pairs_touch, min_separation=min_separation),
+                        (no, no), (x, tol))
+    return near | run_if(many, distances, no, (x, tol))

@@ -135,6 +135,14 @@ def matvec(K: BorderedTridiagonal, vt, vm):
     return Tv + K.border @ vm, K.border.T @ vt + K.corner @ vm
 
 
+def matvec_columns(K: BorderedTridiagonal, Vt, Vm):
+    """[`matvec`][] of each column of `Vt` (N, k), `Vm` (2, k)."""
+    if isinstance(K, BorderedDense):
+        return K.block @ Vt + K.border @ Vm, K.border.T @ Vt + K.corner @ Vm
+    Tv = K.diag[:, None] * Vt + K.upper[:, None] * jnp.roll(Vt, -1, axis=0) + K.lower[:, None] * jnp.roll(Vt, 1, axis=0)
+    return Tv + K.border @ Vm, K.border.T @ Vt + K.corner @ Vm
+
+
 def _tri(K, shift, rhs):
     return tridiagonal_solve(K.lower, K.diag - shift, K.upper, rhs)
 
@@ -149,6 +157,24 @@ def solve(K: BorderedTridiagonal, rt, rm, shift=0.0):
     b = _solve2(S, rm - K.border.T @ X[:, 0])
     a = X[:, 0] - X[:, 1:] @ b
     return a, b
+
+
+def solve_columns(K: BorderedTridiagonal, Rt, Rm):
+    r"""$\mathsf K\,(A, B) = (R_\theta, R_\mu)$ for $k$ right-hand sides at once (`Rt` of shape
+    (N, k), `Rm` (2, k)): one tridiagonal solve with the $k$ columns and the two border
+    columns, each column as [`solve`][] computes it alone. Returns `(A, B, nu)` with
+    $\nu(0)$, the number of negative constrained eigenvalues, from the same solve's Schur
+    complement $S=C-P^\top T^{-1}P$ (`count_below` at zero, without a second solve)."""
+    if isinstance(K, BorderedDense):
+        X = _dense_solve(K.dense(), jnp.concatenate([Rt, Rm], axis=0))
+        return X[:-2], X[-2:], count_below(K, jnp.zeros(1, K.block.dtype))[0]
+    k = Rt.shape[1]
+    X = _tri(K, 0.0, jnp.concatenate([Rt, K.border], axis=1))
+    S = K.corner - K.border.T @ X[:, k:]
+    B = jnp.stack([_solve2(S, Rm[:, j] - K.border.T @ X[:, j]) for j in range(k)], axis=1)
+    A = X[:, :k] - X[:, k:] @ B
+    nu = _pivot_negatives(K, jnp.zeros(1, K.diag.dtype))[0] + _sym2_negatives(S) - 2
+    return A, B, nu
 
 
 def _pivot_negatives(K: BorderedTridiagonal, shifts):
