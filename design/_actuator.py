@@ -89,9 +89,10 @@ def half_heights(theta, force, scene):
 
 
 def half_state(h) -> str:
-    """Two letters from `half_heights`: left half then right half, U (above) or D."""
+    """Two letters from `half_heights`: left half then right half, U (above) or D; "?" for a
+    height that is not finite (no state: a landing that found no stable equilibrium)."""
     h = np.asarray(h)
-    return ("U" if h[0] > 0 else "D") + ("U" if h[2] > 0 else "D")
+    return "".join("U" if x > 0 else "D" if x <= 0 else "?" for x in (h[0], h[2]))
 
 
 def flipped(a: str, b: str) -> frozenset:
@@ -150,7 +151,7 @@ def _segment(scene, theta, force, a0, a1, settings):
     a_land = a0 + (t_c + 1e-3) * par.u
     sc_c, sc_l = _at(scene, a_c), _at(scene, a_land)
     end = jr.solve_equilibrium(_at(scene, a1), br.theta[last], br.force[last])
-    return dict(snaps=snaps, t_c=t_c, a_c=a_c, a_land=a_land,
+    return dict(snaps=snaps, t_c=t_c, a_c=a_c, a_land=a_land, landed=p.result != RESULTS.landing_failed,
                 h_before=half_heights(p.theta_before, p.force_before, sc_c),
                 theta_after=p.theta_after, force_after=p.force_after,
                 h_after=half_heights(p.theta_after, p.force_after, sc_l),
@@ -199,7 +200,8 @@ def quasi_static_move(scene, theta, force, a_from_deg, a_to_deg, *, settings=MOV
                       max_snaps=3) -> MoveReport:
     """Move the clamps quasi-statically along a straight line from `a_from_deg` to `a_to_deg`
     ((alpha_L, alpha_R) in degrees), starting from the equilibrium (theta, force) at
-    `a_from_deg`; after each snap continue from the landing state."""
+    `a_from_deg`; after each snap continue from the landing state (a snap whose landing finds
+    no stable state, `landing_failed`, ends the move there: final letters "??", not stable)."""
     _check_n(scene.mesh.n)
     a0 = jnp.deg2rad(jnp.asarray(a_from_deg, float))
     a1 = jnp.deg2rad(jnp.asarray(a_to_deg, float))
@@ -217,6 +219,10 @@ def quasi_static_move(scene, theta, force, a_from_deg, a_to_deg, *, settings=MOV
             events.append(SnapEvent(tuple(np.degrees(r["a_c"]).round(6)), tuple(hb), tuple(ha), sb, sa,
                                     flipped(sb, sa)))
             state = sa
+            if not bool(r["landed"]):
+                # no stable state past the snap (`landing_failed`): the move ends there, unknown
+                return MoveReport(tuple(np.asarray(a_from_deg, float)), tuple(np.asarray(a_to_deg, float)), start,
+                                  events, drift, sa, tuple(ha), False, r["theta_after"], r["force_after"])
             t, m, a = jnp.asarray(r["theta_after"]), jnp.asarray(r["force_after"]), jnp.asarray(r["a_land"])
             continue
         break

@@ -61,6 +61,31 @@ def test_program_does_what_it_says(moves):
     assert len(left.events) == 1 and len(both.events) == 1
 
 
+def test_failed_landing_ends_the_move(program, monkeypatch):
+    """A snap whose landing finds no stable state (`landing_failed`) ends the move there, with
+    letters "??" and not stable: before, the move went on from the NaN state, which read "DD"
+    (the N = 48 re-check of the program: every step DD -> DD)."""
+    import equinox as eqx
+    from jaxrod.branches import _snap
+
+    real = _snap._land
+
+    def no_landing(*args):
+        t, m, fa, eq = real(*args)
+        return t, m, fa, eqx.tree_at(lambda e: e.result, eq, jr.RESULTS.max_steps_reached)
+
+    monkeypatch.setattr(_snap, "_land", no_landing)
+    segment = act._segment.__wrapped__
+    monkeypatch.setattr(act, "_segment", eqx.filter_jit(lambda *a: segment(*a)))  # a fresh trace
+    wp, _ = program
+    sc = jr.make_scene(PSI0, GAP, 0.0, n=N)
+    eq = jr.initial_state(act._at(sc, np.radians(wp[0])), "down")
+    r = act.quasi_static_move(sc, eq.theta, eq.force, wp[0], wp[1])
+    assert act.half_state([np.nan, 0.0, np.nan]) == "??"
+    assert r.start == "DD" and r.final == "??" and not r.stable and not act.move_ok(r, 0)
+    assert len(r.events) == 1 and r.events[0].before == "DD" and r.events[0].after == "??"
+
+
 @pytest.mark.slow  # a second mesh compile; the converged study (slow) re-checks at N = 160 too
 def test_program_rechecked_at_finer_mesh(program, moves):
     """An independent quasi-static run of the same waypoints on twice the segments: every step

@@ -148,6 +148,50 @@ def test_failed_landing_is_reported_not_dropped(snap, monkeypatch):
         assert np.isnan(float(p.fold_height_after)) and np.all(np.isnan(np.asarray(p.theta_after)))
 
 
+@pytest.fixture(scope="module")
+def land():
+    """`_land` of the scene of `snap(60.0, 0.5)` under symmetric actuation, jitted: (landed
+    state, fold height, RESULTS code, unstable count of the last relaxation)."""
+    from jaxrod.branches import SymmetricAlpha, _snap
+
+    sc = jr.make_scene(60.0, 0.5, 0.0)
+
+    @jax.jit
+    def f(t, m, lam, v, direction):
+        ta, _, fa, eq = _snap._land(sc, SymmetricAlpha(), t, m, lam, v, direction, direction > 0, jr.Newton())
+        return ta, fa, eq.result, eq.num_unstable
+
+    return lambda p, v, direction: f(p.theta_before, p.force_before, p.alpha_c, v, jnp.asarray(direction))
+
+
+def test_landing_recomputes_a_nonfinite_mode(snap, land):
+    """The mode handed to the landing can be NaN (at a fold, `_refine`'s corrector at the far end
+    of a bracket at round-off, 2^-48 of a step as the actuator study asks, solves with a Hessian
+    singular to round-off: the study's one-sided snap at N = 32 and 48 got NaN there). The
+    landing does not push along it into a NaN start: it recomputes the mode at the critical
+    state and lands where the true mode lands; before, the path was `landing_failed`."""
+    r = snap(60.0, 0.5)
+    for p, direction in ((r.up, 1.0), (r.down, -1.0)):
+        ta, fa, res, nu = land(p, jnp.full_like(p.mode, jnp.nan), direction)
+        assert res == jr.RESULTS.successful and int(nu) == 0
+        assert np.max(np.abs(np.asarray(ta - p.theta_after))) < 1e-9
+        assert abs(float(fa) - float(p.fold_height_after)) < 1e-9
+
+
+def test_landing_leaves_a_saddle(snap, land):
+    """A relaxation that keeps the mirror symmetry of the branch point (snap up of Psi0 = 60 deg,
+    G/L = 0.5, a branch point: here no push at all) converges to the symmetric state past it, a
+    saddle (`converged_to_saddle`, one unstable mode; before, the path was `landing_failed`). The
+    landing accepts only a stable state: it pushes on along the saddle's unstable mode and lands
+    where the snap's push along the critical mode does."""
+    r = snap(60.0, 0.5)
+    assert int(r.up.kind) == 2
+    ta, fa, res, nu = land(r.up, jnp.zeros_like(r.up.mode), 1.0)
+    assert res == jr.RESULTS.successful and int(nu) == 0
+    assert np.max(np.abs(np.asarray(ta - r.up.theta_after))) < 1e-9
+    assert float(fa) > 0 and abs(float(fa) - float(r.up.fold_height_after)) < 1e-9
+
+
 def test_cli_snap_angles_reports_an_unknown_path(monkeypatch, capsys):
     """The CLI exits with 3 and names the result where a path's outcome is unknown."""
     import json

@@ -187,12 +187,30 @@ def branch_crossings(theta, force, count, scene):
     return lax.fori_loop(0, count, body, jnp.zeros(theta.shape[0], bool))
 
 
+def _discretization(scene, parameter):
+    """`sc -> discretize(sc)` for the scenes `parameter.set(scene, lam)`: for the clamp
+    angles and the gap (which leave the mesh and the crease as they are) the scene's
+    discretization computed once with the clamp tangents of `sc` put in, not the natural
+    angles' differences anew at every evaluation."""
+    if not isinstance(parameter, (SymmetricAlpha, LeftAlpha, RightAlpha, Gap)):
+        return discretize
+    d0 = discretize(scene)
+    dtype = d0.h.dtype
+
+    def at(sc):
+        return d0._replace(theta_left=jnp.asarray(sc.clamps.alpha_left, dtype),
+                           theta_right=-jnp.asarray(sc.clamps.alpha_right, dtype))
+
+    return at
+
+
 def _pieces(scene, parameter):
     """Residual F(x, lam), its lam-derivative and the structured Jacobian."""
+    disc = _discretization(scene, parameter)
 
     def grad_at(t, m, lam):
         sc = parameter.set(scene, lam)
-        return lagrangian_gradient(t, m, sc, discretize(sc))
+        return lagrangian_gradient(t, m, sc, disc(sc))
 
     def F(t, m, lam):
         return grad_at(t, m, lam)
@@ -201,7 +219,8 @@ def _pieces(scene, parameter):
         return jax.jvp(lambda ll: grad_at(t, m, ll), (lam,), (jnp.ones_like(lam),))[1]
 
     def K(t, m, lam):
-        return kkt.structured(t, m, parameter.set(scene, lam))
+        sc = parameter.set(scene, lam)
+        return kkt.structured(t, m, sc, disc(sc))
 
     return F, F_lam, K
 
@@ -372,6 +391,7 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
     require_float64(dtype, "continue_branch")
     tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
     F, F_lam, Kf = _pieces(scene, parameter)
+    disc = _discretization(scene, parameter)
     d = discretize(scene)
     w = d.h
     M = settings.max_points
@@ -387,7 +407,8 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
     lo, hi = bounds
 
     def fh(t, m, lam):
-        return positions(t, m, parameter.set(scene, lam))[N // 2, 1]
+        sc = parameter.set(scene, lam)
+        return positions(t, m, sc, disc(sc))[N // 2, 1]
 
     buf = dict(
         lam=jnp.full((M,), jnp.nan, dtype).at[0].set(lam0),

@@ -1,6 +1,7 @@
 r"""Phase diagram of the snap angles (paper Fig. 2c): $\alpha_{c,\rm up}$ and
 $\alpha_{c,\rm down}$ of [`jaxrod.snap_angles`][] over a grid of fold angles $\Psi_0$ and
-gaps $G/L$ (symmetric actuation, $\alpha_L=\alpha_R=\alpha$, conventions of MODEL.md).
+gaps $G/L$ (symmetric actuation, $\alpha_L=\alpha_R=\alpha$, conventions of MODEL.md), and
+optionally over fold widths $s_0$.
 
 One chunk per $\Psi_0$: a single jitted call that runs through the gaps in order
 (`lax.scan`). The start states of each gap (up and down at $\alpha=0$) come from Newton
@@ -33,10 +34,18 @@ Measured on 2 CPU cores (`benchmarks/bench_phase.py`, both side by side, 5 x 41 
 N = 100): the vmapped call 3.98 s, the sequential chunks 2.70 s, so `batch="auto"` picks
 `"scan"` (one call per $\Psi_0$) on the CPU and `"vmap"` elsewhere.
 
-With `out`, each finished chunk is written to `out/chunks/psi0_<deg>.nc` (NetCDF3 via
-scipy) and the run is resumable: a chunk whose file exists with the same grid, $s_0$
-and mesh is read back, not recomputed. The assembled `xarray.Dataset` goes to
-`out/phase_diagram.nc`.
+**The fold width as an axis** (`s0` a list or array): a chunk is then one pair
+$(s_0, \Psi_0)$, and the pairs are the batch of the same machinery: one call per pair
+(`"scan"`), every pair in one vmapped call (`"vmap"`, $s_0$ batched beside $\Psi_0$), or the
+pairs split across the devices (`"shard"`). $s_0$ is traced like $\Psi_0$, so every pair
+reuses the one compiled chunk (the mesh does not depend on $s_0$). The dataset gains a
+leading `s0` dimension; a scalar `s0` keeps the `(psi0, gap)` grid and its files as they
+are, so its stored chunks stay valid.
+
+With `out`, each finished chunk is written to `out/chunks/psi0_<deg>.nc`
+(`out/chunks/s0_<s0>_psi0_<deg>.nc` with an `s0` axis; NetCDF3 via scipy) and the run is
+resumable: a chunk whose file exists with the same grid, $s_0$ and mesh is read back, not
+recomputed. The assembled `xarray.Dataset` goes to `out/phase_diagram.nc`.
 """
 
 from __future__ import annotations
@@ -56,7 +65,7 @@ from jax import lax
 from ._continuation import Continuation, SymmetricAlpha
 from ..statics import float_scene
 from ..statics import initial_state_signed
-from .._misc import check_grid, package_version, jit
+from .._misc import check_grid, check_param, package_version, jit
 from ..model import Clamps, Contact, crease_layout, layout_strip, Mesh, Scene
 from ._snap import _snap_angles_from
 from ..results import RESULTS
@@ -146,8 +155,13 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), con
 
 @jit
 def _grid(psis, gaps, s0, mesh, settings=Continuation(), contact=None, layout=()):
-    """All chunks in one call: `vmap` over the fold angles (rad) of `_chunk`."""
-    return jax.vmap(lambda p: _chunk(p, gaps, s0, mesh, settings=settings, contact=contact, **_kw(layout)))(psis)
+    """All chunks in one call: `vmap` of `_chunk` over the fold angles (rad) and, where `s0`
+    holds one width per member (the `(s0, Psi0)` chunks of a grid with an `s0` axis), over
+    the fold widths beside them; a scalar `s0` is shared by every member."""
+    def one(p, s):
+        return _chunk(p, gaps, s, mesh, settings=settings, contact=contact, **_kw(layout))
+
+    return jax.vmap(one, in_axes=(0, None if jnp.ndim(s0) == 0 else 0))(psis, s0)
 
 
 def _resolve_batch(batch):
@@ -162,8 +176,11 @@ def _resolve_batch(batch):
 
 @functools.lru_cache(maxsize=8)
 def _sharded(mesh, settings, devices, per_device, mode, contact=None, layout=()):
-    """One `ShardedMap` of `_chunk` per mesh and split (so repeated calls reuse its compilation)."""
-    return ShardedMap(lambda psi0, shared: _chunk(psi0, shared[0], shared[1], mesh, settings=settings,
+    """One `ShardedMap` of `_chunk` per mesh and split (so repeated calls reuse its
+    compilation). A member is one chunk's `(psi0 (rad), s0)`, the gaps are shared: the
+    fold widths of a grid with an `s0` axis are split across the devices with the fold
+    angles."""
+    return ShardedMap(lambda member, gaps: _chunk(member[0], gaps, member[1], mesh, settings=settings,
                                                   contact=contact, **_kw(layout)),
                       devices=devices, per_device=per_device, mode=mode)
 
@@ -190,10 +207,13 @@ def _chunk_dataset(psi0_deg, gaps, values, attrs):
     return ds.expand_dims(psi0=[float(psi0_deg)])
 
 
-def _chunk_path(out, psi0_deg):
+def _chunk_path(out, psi0_deg, s0=None):
     # 12 significant digits (the CLI rounds its ranges to 12): two fold angles that differ
-    # in the 7th digit get two files instead of overwriting each other's chunk on every run
-    return os.path.join(out, "chunks", f"psi0_{psi0_deg:.12g}.nc")
+    # in the 7th digit get two files instead of overwriting each other's chunk on every run.
+    # `s0` (a grid with an s0 axis) names the fold width too; a scalar s0 keeps the names
+    # of the (psi0, gap) grid
+    name = f"psi0_{psi0_deg:.12g}.nc" if s0 is None else f"s0_{s0:.12g}_psi0_{psi0_deg:.12g}.nc"
+    return os.path.join(out, "chunks", name)
 
 
 def _read_chunk(path, attrs, psi0_deg, gaps):
@@ -228,98 +248,151 @@ def _write(ds, path):
     os.replace(tmp, path)  # atomic: an interrupted write never leaves a half chunk
 
 
+S0_MAX = 1.0  # fold widths of a phase diagram lie in (0, S0_MAX): below the strip's length L = 1
+
+
+def fold_widths(s0):
+    """The fold widths of a phase diagram: `(widths, axis)`, the widths as floats and whether
+    they form an `s0` axis (a list or 1-d array, even of one width) or are one width (a
+    scalar: the `(psi0, gap)` grid). Each width must be finite and in (0, `S0_MAX`) (narrower
+    than the strip, L = 1), and the widths distinct; `ValueError` naming `s0` otherwise."""
+    try:
+        arr = np.asarray(s0, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"s0 must be a number or a list of numbers, got {s0!r}") from None
+    if arr.ndim > 1:
+        raise ValueError(f"s0 must be a number or a one-dimensional list of numbers, got shape {arr.shape}")
+    widths = [float(v) for v in np.atleast_1d(arr)]
+    if not widths:
+        raise ValueError("s0 must hold at least one value")
+    for v in widths:
+        check_param("s0", v, lo=0.0, hi=S0_MAX)
+    if len(set(widths)) != len(widths):
+        raise ValueError(f"s0 values must be distinct, got {', '.join(f'{v:g}' for v in widths)}")
+    return widths, arr.ndim == 1
+
+
 def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progress=True, on_chunk=None,
                   batch="auto", devices=None, per_device=1, split="shard_map", contact=None, creases=None):
-    r"""Critical clamp angles over the grid `psi0_deg` x `gaps` (an `xarray.Dataset`).
+    r"""Critical clamp angles over the grid `psi0_deg` x `gaps`, or `s0` x `psi0_deg` x
+    `gaps` (an `xarray.Dataset`).
 
     **Arguments:** `psi0_deg` fold angles in (0, 180] (degrees), `gaps` values of $G/L$ in
-    (0, 1), `s0`, `n`, `refine`, `contact` (a [`jaxrod.Contact`][]: self-contact modelled)
-    as in [`jaxrod.make_scene`][]; `creases`: crease positions (fractions of L) for a strip
+    (0, 1), `n`, `refine`, `contact` (a [`jaxrod.Contact`][]: self-contact modelled)
+    as in [`jaxrod.make_scene`][]; `s0` the fold width (units of L), one value or a list or
+    array of distinct values (the grid's `s0` axis), each in (0, 1); `creases`: crease
+    positions (fractions of L) for a strip
     with a crease at each, all of fold angle $\Psi_0$ and width `s0` (the mesh refined around
     them with `refine`; attribute `crease_positions`), instead of the one centred crease;
     `out` a directory for the
     resumable chunk files and `phase_diagram.nc`; `progress` a tqdm bar;
-    `on_chunk(psi0_deg, computed: bool)` called after each chunk; `batch` `"scan"` (one
-    compiled call per $\Psi_0$), `"vmap"` (every $\Psi_0$ still to compute in one vmapped
-    call), `"shard"` (the fold angles still to compute split across `devices`, default every
+    `on_chunk(chunk, computed: bool)` called after each chunk, `chunk` its `psi0_deg` (the
+    pair `(s0, psi0_deg)` with an `s0` axis); `batch` `"scan"` (one
+    compiled call per chunk), `"vmap"` (every chunk still to compute in one vmapped
+    call), `"shard"` (the chunks still to compute split across `devices`, default every
     device of every process, `per_device` of them per device in each call, by
     [`jaxrod.sweeps.ShardedMap`][] with its `mode` = `split`) or `"auto"` (`"shard"` where JAX
     sees more than one device, else `"scan"` on the CPU, where it measured faster, and
-    `"vmap"` elsewhere). All give the same numbers. With several processes
+    `"vmap"` elsewhere). A chunk is one $\Psi_0$ (one pair $(s_0, \Psi_0)$ with an `s0`
+    axis) and all the gaps. All give the same numbers. With several processes
     (`jax.distributed.initialize()`), process 0 writes the files and every process reads
     `out`, which must then be one shared folder.
 
-    **Returns:** dataset with dims `(psi0, gap)`: `alpha_c_up`, `alpha_c_down` (degrees,
+    **Returns:** dataset with dims `(psi0, gap)` (`(s0, psi0, gap)` where `s0` is a list or
+    array, with the coordinate `s0`; for a scalar the attribute `s0`): `alpha_c_up`,
+    `alpha_c_down` (degrees,
     NaN where the path does not snap), `kind_up`/`kind_down` (0 none, 1 fold, 2 branch
     point), fold heights before/after each snap, `start_up`/`start_down` (RESULTS codes of
     the start states), `result_up`/`result_down` (RESULTS codes of the whole paths, as
     `SnapPath.result`: not successful where NaN angles do not mean "does not snap"), `warm_starts` (how many of the two start states came from the
-    previous gap, see the module docstring); attribute `computed_chunks` lists the $\Psi_0$ computed by this call
+    previous gap, see the module docstring); attribute `computed_chunks` lists the chunks
+    computed by this call, as `on_chunk` names them
     (the others were read back from `out`), `batch` the mode used, and the provenance
     `jaxrod_version`, `jax_version`, `backend`, `device_count`, `process_count`, `date_utc`
     (also in `phase_diagram.nc`). Needs float64.
     """
     import xarray as xr
 
-    psis, gaps = check_grid(psi0_deg, gaps, s0, "phase_diagram")
-    layout = _layout(creases, psis, s0)
+    widths, axis = fold_widths(s0)
+    psis, gaps = check_grid(psi0_deg, gaps, widths[0], "phase_diagram")
+    layout = _layout(creases, psis, widths)
     mesh = Mesh(n, refine, centres=layout) if layout else Mesh(n, refine)
     ckey = _contact_key(contact)
-    attrs = _attrs(gaps, s0, n, refine, ckey, layout)
+    attrs = {w: _attrs(gaps, w, n, refine, ckey, layout) for w in widths}
     if out is not None:
         os.makedirs(os.path.join(out, "chunks"), exist_ok=True)
     g_arr = jnp.asarray(gaps, jnp.float64)
-    s0_arr = jnp.asarray(float(s0), jnp.float64)
     batch = _resolve_batch(batch)
     if split not in MODES:
         raise ValueError(f"split must be one of {MODES}, got {split!r}")
-    cached = {p: (_read_chunk(_chunk_path(out, p), attrs, p, gaps) if out is not None else None) for p in psis}
-    missing = np.asarray([cached[p] is None for p in psis])
+    # the chunks, (s0, psi0) pairs in the order of the grid; named by psi0 alone without an s0 axis
+    keys = [(w, p) for w in widths for p in psis]
+    name = (lambda k: k) if axis else (lambda k: k[1])  # noqa: E731
+
+    def path(k):
+        return _chunk_path(out, k[1], k[0] if axis else None)
+
+    cached = {k: (_read_chunk(path(k), attrs[k[0]], k[1], gaps) if out is not None else None) for k in keys}
+    missing = np.asarray([cached[k] is None for k in keys])
     if not np.array_equal(agree(missing), missing):
         raise ValueError(f"out: process {jax.process_index()} finds other finished chunks in {out!r} than "
                          "process 0; a run of several processes needs `out` on one shared file system")
-    todo = [p for p in psis if cached[p] is None]
+    todo = [k for k in keys if cached[k] is None]
     lead = jax.process_index() == 0
     batched = {}
     if batch == "vmap" and todo:
-        # one call for every chunk still missing (the finished ones were read back above)
-        vals = jax.device_get(_grid(jnp.asarray([math.radians(p) for p in todo], jnp.float64), g_arr, s0_arr, mesh,
+        # one call for every chunk still missing (the finished ones were read back above);
+        # with an s0 axis the fold widths are batched beside the fold angles
+        s0_arg = (jnp.asarray([k[0] for k in todo], jnp.float64) if axis
+                  else jnp.asarray(widths[0], jnp.float64))
+        vals = jax.device_get(_grid(jnp.asarray([math.radians(k[1]) for k in todo], jnp.float64), g_arr, s0_arg, mesh,
                                      contact=ckey, **_kw(layout)))
-        batched = {p: {k: v[i] for k, v in vals.items()} for i, p in enumerate(todo)}
+        batched = {k: {v: a[i] for v, a in vals.items()} for i, k in enumerate(todo)}
     sharded = None
     if batch == "shard":
         sharded = _sharded(mesh, Continuation(), None if devices is None else tuple(devices), per_device, split, ckey,
                            layout)
     chunks, computed = [], []
-    it = psis
+    it = keys
     if progress and lead:
         from tqdm import tqdm
 
-        it = tqdm(psis, desc="phase diagram", unit="Psi0")
-    for p in it:
-        ds = cached[p]
-        if ds is None:
-            if sharded is not None and p not in batched:
-                # the next batch of fold angles still to compute, one (or `per_device`) per device
-                left = todo[todo.index(p):][:sharded.size]
-                vals, _ = sharded(np.radians(left), (np.asarray(gaps, np.float64), np.float64(s0)))
-                batched.update({q: {k: v[i] for k, v in vals.items()} for i, q in enumerate(left)})
-            vals = batched.pop(p, None)
+        it = tqdm(keys, desc="phase diagram", unit="chunk" if axis else "Psi0")
+    for k in it:
+        ds = cached[k]
+        fresh = ds is None
+        if fresh:
+            if sharded is not None and k not in batched:
+                # the next batch of chunks still to compute, one (or `per_device`) per device
+                left = todo[todo.index(k):][:sharded.size]
+                members = (np.radians([q[1] for q in left]), np.asarray([q[0] for q in left], np.float64))
+                vals, _ = sharded(members, np.asarray(gaps, np.float64))
+                batched.update({q: {v: a[i] for v, a in vals.items()} for i, q in enumerate(left)})
+            vals = batched.pop(k, None)
             if vals is None:
-                vals = jax.device_get(_chunk(jnp.asarray(math.radians(p), jnp.float64), g_arr, s0_arr, mesh,
-                                             contact=ckey, **_kw(layout)))
-            ds = _chunk_dataset(p, gaps, vals, attrs)
+                vals = jax.device_get(_chunk(jnp.asarray(math.radians(k[1]), jnp.float64), g_arr,
+                                             jnp.asarray(k[0], jnp.float64), mesh, contact=ckey, **_kw(layout)))
+            ds = _chunk_dataset(k[1], gaps, vals, attrs[k[0]])
             if out is not None and lead:
-                _write(ds, _chunk_path(out, p))
-            computed.append(p)
+                _write(ds, path(k))
+            computed.append(name(k))
         chunks.append(ds)
         if on_chunk is not None:
-            on_chunk(p, p in computed)
-    full = xr.concat(chunks, dim="psi0")
-    full.attrs = dict(attrs, units="alpha in degrees, G/L and fold heights in units of L",
+            on_chunk(name(k), fresh)
+    m = len(psis)
+    if axis:
+        rows = [xr.concat(chunks[i * m:(i + 1) * m], dim="psi0").expand_dims(s0=[w]) for i, w in enumerate(widths)]
+        full = xr.concat(rows, dim="s0")
+        base = {a: v for a, v in attrs[widths[0]].items() if a != "s0"}  # the coordinate holds them
+    else:
+        full = xr.concat(chunks, dim="psi0")
+        base = attrs[widths[0]]
+    full.attrs = dict(base, units="alpha in degrees, G/L and fold heights in units of L",
                       kinds="0 none, 1 fold, 2 branch_point")
     full["alpha_c_up"].attrs["long_name"] = "snap-up critical clamp angle (deg)"
     full["alpha_c_down"].attrs["long_name"] = "snap-down critical clamp angle (deg)"
+    if axis:
+        full["s0"].attrs["long_name"] = "fold width s0 / L"
     full.attrs.update(jaxrod_version=package_version(), jax_version=jax.__version__, backend=jax.default_backend(),
                       device_count=len(sharded.devices) if sharded is not None else 1,
                       process_count=jax.process_count(),
@@ -331,10 +404,14 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     return full
 
 
-def _layout(creases, psis, s0):
-    """`creases` (positions, fractions of L) as a sorted static tuple (`crease_layout`); ()
-    for None."""
-    return () if creases is None else crease_layout(creases, psis, s0)
+def _layout(creases, psis, widths):
+    """`creases` (positions, fractions of L) as a sorted static tuple (`crease_layout`),
+    checked at every fold width of `widths`; () for None."""
+    if creases is None:
+        return ()
+    for w in widths:
+        layout = crease_layout(creases, psis, w)
+    return layout
 
 
 def termination_gaps(psi0_deg, *, s0=0.02, n=100):
