@@ -37,7 +37,8 @@ from jax import lax
 from jaxtyping import Array
 
 from ..linalg import kkt
-from ._continuation import Continuation, SymmetricAlpha, _pieces, continue_branch, require_float64, corrector
+from ._continuation import (Continuation, SymmetricAlpha, _bordered_columns, _pieces, _residual_norm,
+                            continue_branch, require_float64)
 from ..energy.contact import contact_energy, self_intersects, step_bound
 from ._critical import located_critical_point
 from ..energy.geometry import discretize
@@ -144,29 +145,65 @@ def _refine(scene, parameter, branch, settings, tol, bisections):
     def symmetric(t, m):
         return jnp.where(sym, 0.5 * (t - t[::-1]), t), jnp.where(sym, 0.5 * (m + flip * m), m)
 
-    # `bisections` halvings, then one more pass that corrects at `hi`, the state just past
-    # the critical point (whose critical mode tells the kind): one corrector call site. Each
-    # correction starts from the last stable state moved along the tangent to `s`, at most
-    # the bracket's width away (the prediction from `a` is up to the whole step away), so it
-    # takes fewer Newton iterations to the same point
-    def body(k, c):
-        lo, hi, best, after = c
-        last = k == bisections
-        s = jnp.where(last, hi, 0.5 * (lo + hi))
-        guess = tuple(b + (s - lo) * d for b, d in zip(best, tau))
-        t, m, lam, conv, _ = corrector(scene, parameter, (ta, ma), la, tau, s, settings.steps_for(scene), tol,
-                                       guess, finish=True)
-        t, m = symmetric(t, m)
-        nu = kkt.count_below(Kf(t, m, lam), jnp.zeros(1, t.dtype))[0]
-        stable_side = conv & (nu == nu_a) & ~last
-        lo = jnp.where(stable_side, s, lo)
-        hi = jnp.where(stable_side, hi, s)
-        best = jax.tree.map(lambda new, old: jnp.where(stable_side, new, old), (t, m, lam), best)
-        after = jax.tree.map(lambda new, old: jnp.where(last, new, old), (t, m, lam), after)
-        return lo, hi, best, after
+    # `bisections` halvings, then one more trial that corrects at `hi`, the state just past
+    # the critical point (whose critical mode tells the kind). Each correction starts from
+    # the last stable state moved along the tangent to `s`, at most the bracket's width away
+    # (the prediction from `a` is up to the whole step away), so it takes fewer Newton
+    # iterations to the same point. As `corrector(..., finish=True)`: Newton on the residual
+    # and the hyperplane `s` from `a` along the tangent, one more step once converged; a
+    # point farther than `s` from its prediction has left the branch. One pass of the loop is
+    # one Newton iteration, or the unstable count of a corrected point (from the same
+    # bordered solve), so that under `vmap` each member goes from trial to trial on its own
+    steps = settings.steps_for(scene)
+    cw = w * tau[0]
+    solve, count = 0, 1
+
+    def at(lo, hi, j):
+        return jnp.where(j == bisections, hi, 0.5 * (lo + hi))
+
+    def cond(c):
+        return c["j"] <= bisections
+
+    def body(c):
+        lo, hi, j, (xt, xm, xl) = c["lo"], c["hi"], c["j"], c["x"]
+        s = at(lo, hi, j)
+        tp, lp = ta + s * tau[0], la + s * tau[2]
+        g = F(xt, xm, xl)
+        rs = jnp.dot(cw, xt - tp) + tau[2] * (xl - lp)
+        Dt, Dm, Dl, nu = _bordered_columns(Kf(xt, xm, xl), F_lam(xt, xm, xl), cw, tau[2], -g[0][:, None],
+                                           -g[1][:, None], jnp.reshape(-rs, (1,)))
+        converged = (_residual_norm(g, scene) <= tol) & (jnp.abs(rs) <= tol)
+        k = c["k"] + 1
+        yt, ym, yl = xt + Dt[:, 0], xm + Dm[:, 0], xl + Dl[0]
+        solving = c["phase"] == solve
+        gave_up = ~converged & ((k >= steps) | ~(jnp.all(jnp.isfinite(yt)) & jnp.isfinite(yl)))
+        far = jnp.sqrt(jnp.sum(w * (yt - tp) ** 2) + (yl - lp) ** 2) > jnp.abs(s)
+        yt, ym = symmetric(yt, ym)
+        # the trial is decided by the count of its corrected point, or where its solve gives up
+        decide = ~solving | gave_up
+        last = j == bisections
+        stable_side = ~solving & c["conv"] & (nu == nu_a) & ~last
+        point = jax.tree.map(lambda a_, b_: jnp.where(solving, a_, b_), (yt, ym, yl), c["x"])
+        lo_n = jnp.where(decide & stable_side, s, lo)
+        hi_n = jnp.where(decide & ~stable_side, s, hi)
+        best = jax.tree.map(lambda new, old: jnp.where(decide & stable_side, new, old), point, c["best"])
+        after = jax.tree.map(lambda new, old: jnp.where(decide & last, new, old), point, c["after"])
+        j_n = jnp.where(decide, j + 1, j)
+        s_n = at(lo_n, hi_n, j_n)
+        guess = tuple(b_ + (s_n - lo_n) * d_ for b_, d_ in zip(best, tau))
+        x = jax.tree.map(lambda g_, p_, o_: jnp.where(decide, g_, jnp.where(solving, p_, o_)),
+                         guess, (yt, ym, yl), c["x"])
+        phase = jnp.where(decide, solve, jnp.where(solving & converged, count, c["phase"]))
+        return dict(lo=lo_n, hi=hi_n, j=j_n, best=best, after=after, x=x, phase=phase.astype(jnp.int32),
+                    k=jnp.where(decide, 0, k), conv=jnp.where(solving, converged & ~far, c["conv"]))
 
     start = (ta, ma, la)
-    _, _, best, after = lax.fori_loop(0, bisections + 1, body, (jnp.zeros_like(ds_b), ds_b, start, start))
+    lo0, hi0 = jnp.zeros_like(ds_b), ds_b
+    x0 = tuple(b_ + at(lo0, hi0, 0) * d_ for b_, d_ in zip(start, tau))
+    out = lax.while_loop(cond, body, dict(lo=lo0, hi=hi0, j=jnp.zeros((), jnp.int32), best=start, after=start,
+                                          x=x0, phase=jnp.zeros((), jnp.int32), k=jnp.zeros((), jnp.int32),
+                                          conv=jnp.zeros((), bool)))
+    best, after = out["best"], out["after"]
     # the eigenvalue that crosses zero, on both sides of the bracket (one program for both)
     V, mu = lax.map(lambda x: kkt.critical_pair(Kf(*x)), jax.tree.map(lambda a, b: jnp.stack([a, b]), best, after))
     v_lo, v_hi = V[0], V[1] * jnp.where(jnp.dot(V[0], V[1]) < 0, -1.0, 1.0)
