@@ -297,3 +297,258 @@ def test_one_vmapped_call_equals_the_chunks():
             np.testing.assert_array_equal(b, a, err_msg=k)
     assert np.isnan(vm["alpha_c_down"].sel(psi0=30.0, gap=0.8))
     assert np.isfinite(vm["alpha_c_up"].sel(psi0=60.0, gap=[0.3, 0.5])).all()  # G*_up(60) = 0.767
+
+
+# The fold width as an axis: `s0` a list gives a grid (s0, psi0, gap) of (s0, Psi0) chunks
+
+def _fake_chunk_s0(calls):
+    """Stand-in for the compiled chunk whose values depend on the fold width too; records
+    each call's `(s0, psi0 in deg)`."""
+
+    def f(psi0, gaps, s0, mesh, contact=None):
+        calls.append((round(float(s0), 12), round(float(np.degrees(psi0)), 9)))
+        g = np.asarray(gaps)
+        out = {k: np.sin(float(psi0) * (i + 1) + 3.0 * g + 7.0 * float(s0)) for i, k in enumerate(_phase.VARIABLES)}
+        for k in ("kind_up", "kind_down", "start_up", "start_down", "result_up", "result_down"):
+            out[k] = ((np.arange(g.size) + int(1000 * float(s0))) % 3).astype(np.int32)
+        out["alpha_c_down"][0] = np.nan
+        return out
+
+    return f
+
+
+def _assert_same(a, b):
+    for k in _phase.VARIABLES:
+        np.testing.assert_array_equal(a[k].values, b[k].values, err_msg=k)
+
+
+def test_s0_axis_resumes_and_equals_single_widths(tmp_path, monkeypatch):
+    """A list of fold widths: the dataset gains a leading `s0` dimension whose rows are the
+    single-width diagrams; each (s0, Psi0) chunk has its own file with the width in its name,
+    and an interrupted run computes only the chunks it had not finished."""
+    import xarray as xr
+
+    calls = []
+    monkeypatch.setattr(_phase, "_chunk", _fake_chunk_s0(calls))
+    psis, gaps, widths = [30.0, 60.0], [0.2, 0.5, 0.8], [0.02, 0.035]
+    out = str(tmp_path / "a")
+
+    def interrupt_third(chunk, computed):
+        if len(calls) == 3:
+            raise _Stop
+
+    with pytest.raises(_Stop):
+        jr.phase_diagram(psis, gaps, s0=widths, n=40, out=out, progress=False, on_chunk=interrupt_third)
+    assert calls == [(0.02, 30.0), (0.02, 60.0), (0.035, 30.0)]
+    assert sorted(os.listdir(os.path.join(out, "chunks"))) == [
+        "s0_0.02_psi0_30.nc", "s0_0.02_psi0_60.nc", "s0_0.035_psi0_30.nc"]
+    calls.clear()
+    seen = []
+    ds = jr.phase_diagram(psis, gaps, s0=widths, n=40, out=out, progress=False,
+                          on_chunk=lambda c, fresh: seen.append((c, fresh)))
+    assert calls == [(0.035, 60.0)]
+    assert seen == [((0.02, 30.0), False), ((0.02, 60.0), False), ((0.035, 30.0), False), ((0.035, 60.0), True)]
+    assert ds.attrs["computed_chunks"] == [(0.035, 60.0)]
+    assert ds["s0"].values.tolist() == widths and "s0" not in ds.attrs
+    for k in _phase.VARIABLES:
+        assert ds[k].dims == ("s0", "psi0", "gap"), k
+    # each row is the single-width phase diagram
+    for w in widths:
+        _assert_same(ds.sel(s0=w), jr.phase_diagram(psis, gaps, s0=w, n=40, progress=False))
+    with xr.open_dataset(os.path.join(out, "phase_diagram.nc"), engine="scipy") as f:
+        assert f["alpha_c_up"].dims == ("s0", "psi0", "gap") and f["s0"].values.tolist() == widths
+        np.testing.assert_array_equal(f["alpha_c_up"].values, ds["alpha_c_up"].values)
+    # another width list reuses the chunks of the widths it shares; a scalar run keeps its own files
+    calls.clear()
+    jr.phase_diagram(psis, gaps, s0=[0.035, 0.05], n=40, out=out, progress=False)
+    assert calls == [(0.05, 30.0), (0.05, 60.0)]
+    calls.clear()
+    jr.phase_diagram(psis, gaps, s0=0.02, n=40, out=out, progress=False)
+    assert len(calls) == 2 and os.path.exists(os.path.join(out, "chunks", "psi0_30.nc"))
+    # a list of one width keeps its axis
+    one = jr.phase_diagram(psis, gaps, s0=[0.02], n=40, progress=False)
+    assert one["alpha_c_up"].dims == ("s0", "psi0", "gap") and one["s0"].values.tolist() == [0.02]
+
+
+def test_s0_axis_vmap_and_shard_batch_the_pairs(tmp_path, monkeypatch):
+    """`batch="vmap"`: the (s0, Psi0) chunks still missing go to one call of the vmapped grid,
+    the fold widths batched beside the fold angles; `batch="shard"`: the pairs go through
+    `jaxrod.ShardedMap`. Both give the numbers of one call per chunk."""
+    import jax.numpy as jnp
+
+    calls, grid_calls = [], []
+    fake = _fake_chunk_s0(calls)
+    monkeypatch.setattr(_phase, "_chunk", fake)
+
+    def grid(psis, gaps, s0, mesh, contact=None):
+        grid_calls.append((np.degrees(np.asarray(psis)).round(9).tolist(), np.asarray(s0).tolist()))
+        outs = [fake(p, gaps, s, mesh) for p, s in zip(psis, np.broadcast_to(np.asarray(s0), np.shape(psis)))]
+        return {k: np.stack([o[k] for o in outs]) for k in outs[0]}
+
+    monkeypatch.setattr(_phase, "_grid", grid)
+    psis, gaps, widths = [30.0, 60.0], [0.2, 0.5, 0.8], [0.02, 0.035]
+    jr.phase_diagram([60.0], gaps, s0=[0.035], n=40, out=str(tmp_path), progress=False, batch="scan")
+    ds = jr.phase_diagram(psis, gaps, s0=widths, n=40, out=str(tmp_path), progress=False, batch="vmap")
+    assert grid_calls == [([30.0, 60.0, 30.0], [0.02, 0.02, 0.035])]
+    assert ds.attrs["computed_chunks"] == [(0.02, 30.0), (0.02, 60.0), (0.035, 30.0)]
+    calls.clear()
+    ref = jr.phase_diagram(psis, gaps, s0=widths, n=40, progress=False, batch="scan")
+    assert len(calls) == 4
+    _assert_same(ds, ref)
+    # a scalar s0 is passed to the vmapped grid as one shared width, as before
+    grid_calls.clear()
+    jr.phase_diagram(psis, gaps, s0=0.02, n=40, progress=False, batch="vmap")
+    assert grid_calls == [([30.0, 60.0], 0.02)]
+
+    def traced(psi0, gaps, s0, mesh, settings=None, contact=None):
+        out = {k: jnp.sin(psi0 * (i + 1) + 3.0 * gaps + 7.0 * s0) for i, k in enumerate(_phase.VARIABLES)}
+        for k in ("kind_up", "kind_down", "start_up", "start_down", "result_up", "result_down"):
+            out[k] = ((jnp.arange(gaps.size) + (1000 * s0).astype(jnp.int32)) % 3).astype(jnp.int32)
+        out["alpha_c_down"] = out["alpha_c_down"].at[0].set(jnp.nan)
+        return out
+
+    monkeypatch.setattr(_phase, "_chunk", traced)
+    _phase._sharded.cache_clear()
+    try:
+        sh = jr.phase_diagram(psis, gaps, s0=widths, n=40, progress=False, batch="shard", per_device=3)
+        assert sh.attrs["batch"] == "shard" and len(sh.attrs["computed_chunks"]) == 4
+        for k in _phase.VARIABLES:
+            np.testing.assert_allclose(sh[k].values, ref[k].values, rtol=0, atol=1e-12, err_msg=k)
+    finally:
+        _phase._sharded.cache_clear()
+
+
+@pytest.mark.parametrize("s0, match", [
+    ([0.02, 0.0], r"s0 must lie in \(0, 1\), got 0"),
+    ([0.02, float("nan")], "s0 must be a finite number"),
+    (1.0, r"s0 must lie in \(0, 1\), got 1"),
+    ([0.02, float("inf")], "s0 must be a finite number"),
+    ([], "s0 must hold at least one value"),
+    ([0.02, 0.02], "s0 values must be distinct"),
+    ([[0.02, 0.03]], "s0 must be a number or a one-dimensional list"),
+    ("wide", "s0 must be a number"),
+])
+def test_s0_bad_input(s0, match, monkeypatch):
+    calls = []
+    monkeypatch.setattr(_phase, "_chunk", _fake_chunk_s0(calls))
+    with pytest.raises(ValueError, match=match):
+        jr.phase_diagram([60.0], [0.5], s0=s0, n=40, progress=False)
+    assert calls == []
+
+
+def test_s0_figure_one_panel_per_width(tmp_path, monkeypatch):
+    """With an `s0` dimension the figure has one panel per fold width (wider than the single
+    panel), termination gaps per width or shared."""
+    from PIL import Image
+
+    monkeypatch.setattr(_phase, "_chunk", _fake_chunk_s0([]))
+    psis, gaps = [60.0, 180.0], [0.2, 0.5, 0.8]
+    one = jr.plot_phase_diagram(jr.phase_diagram(psis, gaps, progress=False), str(tmp_path / "one.png"))
+    ds = jr.phase_diagram(psis, gaps, s0=[0.01, 0.02, 0.04], progress=False)
+    three = jr.plot_phase_diagram(ds, str(tmp_path / "three.png"),
+                                  termination_gaps={0.01: {60.0: (0.7, 0.75)}, 0.04: {60.0: (0.72, 0.77)}})
+    shared = jr.plot_phase_diagram(ds, str(tmp_path / "shared.png"), termination_gaps={60.0: (0.7, 0.75)})
+    w1, w3 = Image.open(one).size[0], Image.open(three).size[0]
+    assert w3 > 1.5 * w1 and Image.open(shared).size == Image.open(three).size
+
+
+def test_cli_s0_list(tmp_path, monkeypatch, capsys):
+    """`jaxrod phase-diagram --s0 LIST`: the dataset with an s0 axis, its figure, the widths
+    in the JSON record; one width keeps the (psi0, gap) grid."""
+    import xarray as xr
+
+    calls = []
+    monkeypatch.setattr(_phase, "_chunk", _fake_chunk_s0(calls))
+    from jaxrod.cli._main import main
+
+    out = tmp_path / "pd"
+    assert main(["phase-diagram", "--psi0", "60,180", "--gaps", "0.2:0.6:0.2", "--s0", "0.01,0.03",
+                 "--out", str(out), "--no-termination", "--json"]) == 3  # the stand-in's codes flag points
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["s0"] == [0.01, 0.03] and os.path.exists(rec["png"])
+    assert rec["computed_chunks"] == [[0.01, 60.0], [0.01, 180.0], [0.03, 60.0], [0.03, 180.0]]
+    with xr.open_dataset(rec["netcdf"], engine="scipy") as ds:
+        assert ds["alpha_c_up"].dims == ("s0", "psi0", "gap") and ds["s0"].values.tolist() == [0.01, 0.03]
+    assert sorted(calls) == [(0.01, 60.0), (0.01, 180.0), (0.03, 60.0), (0.03, 180.0)]
+    assert main(["phase-diagram", "--psi0", "60", "--gaps", "0.3", "--s0", "0.03", "--out", str(tmp_path / "one"),
+                 "--no-termination", "--json"]) in (0, 3)
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["s0"] == 0.03
+    with xr.open_dataset(rec["netcdf"], engine="scipy") as ds:
+        assert ds["alpha_c_up"].dims == ("psi0", "gap") and ds.attrs["s0"] == 0.03
+
+
+def test_cli_s0_termination_gaps_per_width(tmp_path, monkeypatch, capsys):
+    """Several widths: the figure's termination gaps are computed once per width."""
+    monkeypatch.setattr(_phase, "_chunk", _fake_chunk_s0([]))
+    seen = []
+
+    def fake_gaps(psis, *, s0, n):
+        seen.append((tuple(psis), s0, n))
+        return {p: (0.6 + s0, 0.5 + s0) for p in psis}
+
+    monkeypatch.setattr(jr.branches, "termination_gaps", fake_gaps)  # the CLI imports it from there
+    from jaxrod.cli._main import main
+
+    assert main(["phase-diagram", "--psi0", "60", "--gaps", "0.3,0.5", "--s0", "0.01,0.03", "--n", "40",
+                 "--out", str(tmp_path), "--json"]) == 3
+    rec = json.loads(capsys.readouterr().out)
+    assert seen == [((60.0,), 0.01, 40), ((60.0,), 0.03, 40)]
+    assert rec["termination_gaps"] == {"0.01": {"60": [0.61, 0.51]}, "0.03": {"60": [0.63, 0.53]}}
+
+
+@pytest.mark.parametrize("value", ["0.02,0", "0.02,nan", "abc", "0.02,1.5", "0.02,0.02", "0.05:0.01:0.01", "-0.1"])
+def test_cli_s0_bad_input(value, capsys, tmp_path):
+    from jaxrod.cli._main import main
+
+    assert main(["phase-diagram", "--out", str(tmp_path), "--s0", value]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--s0" in err[0] and "Traceback" not in err[0], err
+
+
+def test_scalar_s0_keeps_the_grid(chunks):
+    """A scalar `s0` (the default): dims `(psi0, gap)`, no `s0` coordinate, the width as the
+    attribute `s0`, chunk files named by the fold angle alone."""
+    assert set(chunks.dims) == {"psi0", "gap"} and "s0" not in chunks.coords
+    assert chunks.attrs["s0"] == 0.02
+    for k in _phase.VARIABLES:
+        assert chunks[k].dims == ("psi0", "gap"), k
+    assert _phase._chunk_path("d", 60.0) == os.path.join("d", "chunks", "psi0_60.nc")
+
+
+def test_s0_axis_equals_separate_phase_diagrams(chunks):
+    """The real computation with an s0 axis (2 widths x 2 fold angles x the fixture's gaps,
+    the chunk compiled for the fixture reused: s0 is traced) equals separate single-width
+    phase diagrams: alpha_c and fold heights to 1e-9 deg, the same kinds and codes, and the
+    widths change the numbers."""
+    psis, widths = [30.0, 60.0], [0.02, 0.035]
+    ds = jr.phase_diagram(psis, PHASE_GAPS, s0=widths, n=PHASE_N, progress=False)
+    assert ds["alpha_c_up"].dims == ("s0", "psi0", "gap")
+    other = jr.phase_diagram(psis, PHASE_GAPS, s0=0.035, n=PHASE_N, progress=False)
+    for w, ref in ((0.02, chunks.sel(psi0=psis)), (0.035, other)):
+        for k in _phase.VARIABLES:
+            a, b = ds[k].sel(s0=w).values, ref[k].values
+            if a.dtype.kind == "f":
+                np.testing.assert_allclose(a, b, rtol=0, atol=1e-9, err_msg=(w, k))
+                assert np.array_equal(np.isnan(a), np.isnan(b)), (w, k)
+            else:
+                np.testing.assert_array_equal(a, b, err_msg=(w, k))
+    up = ds["alpha_c_up"].sel(psi0=60.0, gap=0.5).values
+    assert np.all(np.isfinite(up)) and abs(up[1] - up[0]) > 1e-3
+
+
+@pytest.mark.slow  # compiles the vmapped chunk (25 s on 2 cores); CI checks the pairs' batching with stand-ins
+def test_s0_axis_as_one_vmapped_call():
+    """The s0 axis as one jitted, vmapped call over (s0, Psi0) pairs equals the separate
+    single-width diagrams of one compiled call per Psi0: alpha_c to 1e-9 deg, same codes."""
+    psis, gaps, widths = [30.0, 60.0], [0.3, 0.5, 0.8], [0.02, 0.035]
+    vm = jr.phase_diagram(psis, gaps, s0=widths, n=24, batch="vmap", progress=False)
+    for w in widths:
+        ref = jr.phase_diagram(psis, gaps, s0=w, n=24, batch="scan", progress=False)
+        for k in _phase.VARIABLES:
+            a, b = vm[k].sel(s0=w).values, ref[k].values
+            if a.dtype.kind == "f":
+                np.testing.assert_allclose(a, b, rtol=0, atol=1e-9, err_msg=(w, k))
+                assert np.array_equal(np.isnan(a), np.isnan(b)), (w, k)
+            else:
+                np.testing.assert_array_equal(a, b, err_msg=(w, k))

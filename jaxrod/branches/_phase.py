@@ -65,7 +65,7 @@ from jax import lax
 from ._continuation import Continuation, SymmetricAlpha
 from ..statics import float_scene
 from ..statics import initial_state_signed
-from .._misc import check_grid, check_param, package_version, jit
+from .._misc import check_grid, fold_widths, package_version, jit
 from ..model import Clamps, Contact, crease_layout, layout_strip, Mesh, Scene
 from ._snap import _snap_angles_from
 from ..results import RESULTS
@@ -246,30 +246,6 @@ def _write(ds, path):
     tmp = path + ".part"
     ds.to_netcdf(tmp, engine="scipy", format="NETCDF3_64BIT")
     os.replace(tmp, path)  # atomic: an interrupted write never leaves a half chunk
-
-
-S0_MAX = 1.0  # fold widths of a phase diagram lie in (0, S0_MAX): below the strip's length L = 1
-
-
-def fold_widths(s0):
-    """The fold widths of a phase diagram: `(widths, axis)`, the widths as floats and whether
-    they form an `s0` axis (a list or 1-d array, even of one width) or are one width (a
-    scalar: the `(psi0, gap)` grid). Each width must be finite and in (0, `S0_MAX`) (narrower
-    than the strip, L = 1), and the widths distinct; `ValueError` naming `s0` otherwise."""
-    try:
-        arr = np.asarray(s0, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"s0 must be a number or a list of numbers, got {s0!r}") from None
-    if arr.ndim > 1:
-        raise ValueError(f"s0 must be a number or a one-dimensional list of numbers, got shape {arr.shape}")
-    widths = [float(v) for v in np.atleast_1d(arr)]
-    if not widths:
-        raise ValueError("s0 must hold at least one value")
-    for v in widths:
-        check_param("s0", v, lo=0.0, hi=S0_MAX)
-    if len(set(widths)) != len(widths):
-        raise ValueError(f"s0 values must be distinct, got {', '.join(f'{v:g}' for v in widths)}")
-    return widths, arr.ndim == 1
 
 
 def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progress=True, on_chunk=None,

@@ -6,7 +6,7 @@ with `set_defaults`. Shared pieces: `jaxrod.cli._main.add_scene_args`, `make_sce
 `InputError` (one-line error, exit 2), `EXIT_OK`, `EXIT_USAGE`, `EXIT_NOT_CONVERGED`.
 
     jaxrod hysteresis --psi0 60 --gap 0.5 [--s0 0.02] [--n 100] [--plot FILE.png] [--json]
-    jaxrod phase-diagram --psi0 30,60,90,120,180 --gaps 0.1:0.9:0.02 --out DIR [--json]
+    jaxrod phase-diagram --psi0 30,60,90,120,180 --gaps 0.1:0.9:0.02 [--s0 0.01,0.02,0.04] --out DIR [--json]
 """
 
 from __future__ import annotations
@@ -105,20 +105,28 @@ def _cmd_phase_diagram(args):
 
     psis = _parse_list(args.psi0, "psi0")
     gaps = _parse_list(args.gaps, "gaps")
-    from .._misc import check_param
+    # one fold width: the (psi0, gap) grid; several: the grid gains an s0 axis
+    s0s = _parse_list(args.s0, "--s0")
+    from .._misc import check_param, fold_widths
 
+    try:
+        fold_widths(s0s)
+    except ValueError as e:
+        raise InputError(f"--s0: {e}") from None
+    s0 = s0s[0] if len(s0s) == 1 else s0s
     try:
         for p in psis:
             check_param("psi0", p, lo=0.0, hi=180.0, hi_open=False, unit=" deg")
         for g in gaps:
             check_param("gap", g, lo=0.0, hi=1.0)
-        check_param("s0", args.s0, lo=0.0)
         import jaxrod as jr
 
         jr.Mesh(args.n, args.refine)
         layout = None
         if args.creases_at is not None:
-            layout = list(jr.model.crease_layout(_parse_list(args.creases_at, "creases-at"), psis, args.s0))
+            positions = _parse_list(args.creases_at, "creases-at")
+            for w in s0s:
+                layout = list(jr.model.crease_layout(positions, psis, w))
     except ValueError as e:
         raise InputError(str(e)) from None
     import jax  # joined to the other processes by `main` (`start_distributed`) when asked
@@ -133,24 +141,35 @@ def _cmd_phase_diagram(args):
 
     t0 = time.time()
     try:
-        ds = jr.phase_diagram(psis, gaps, s0=args.s0, n=args.n, refine=args.refine, out=args.out,
+        ds = jr.phase_diagram(psis, gaps, s0=s0, n=args.n, refine=args.refine, out=args.out,
                               batch=args.batch, split=args.split, progress=jax.process_index() == 0, creases=layout)
     except ValueError as e:  # a multi-process run without a shared --out
         raise InputError(str(e)) from None
     wall = time.time() - t0
     if jax.process_index() != 0:
         return EXIT_OK  # process 0 draws, prints and reports
-    # the termination gaps are those of the centred crease: not drawn for a crease layout
-    tg = None if (args.no_termination or layout) else termination_gaps(psis, s0=args.s0, n=args.n)
+    # the termination gaps are those of the centred crease: not drawn for a crease layout;
+    # with several fold widths, one set per width ({s0: {psi0: (G*_up, G*_down)}})
+    tg = None
+    if not (args.no_termination or layout):
+        tg = {w: termination_gaps(psis, s0=w, n=args.n) for w in s0s}
+        if len(s0s) == 1:
+            tg = tg[s0s[0]]
     png = os.path.join(args.out, "phase_diagram.png")
+    width = f"s0/L = {s0s[0]:g}, " if len(s0s) == 1 else ""
     jr.plot_phase_diagram(ds, png, termination_gaps=tg,
-                          title=f"critical clamp angles, s0/L = {args.s0:g}, n = {args.n}, refine = {args.refine:g}"
+                          title=f"critical clamp angles, {width}n = {args.n}, refine = {args.refine:g}"
                           + (f"; creases at {', '.join(f'{c:g}' for c in layout)} L" if layout else ""))
+
+    def gaps_record(t):
+        return {f"{k:g}": [_fin(a) for a in v] for k, v in t.items()}
+
     rec = {"out": args.out, "netcdf": os.path.join(args.out, "phase_diagram.nc"), "png": png,
-           "psi0_deg": psis, "gaps": gaps, "s0": args.s0, "n": args.n, "refine": args.refine,
+           "psi0_deg": psis, "gaps": gaps, "s0": s0, "n": args.n, "refine": args.refine,
            "creases_at": layout, "computed_chunks": ds.attrs["computed_chunks"], "wall_s": wall, "batch": ds.attrs["batch"],
            "devices": int(ds.attrs["device_count"]), "processes": int(ds.attrs["process_count"]),
-           "termination_gaps": None if tg is None else {f"{k:g}": [_fin(a) for a in v] for k, v in tg.items()}}
+           "termination_gaps": None if tg is None else (gaps_record(tg) if len(s0s) == 1 else
+                                                        {f"{w:g}": gaps_record(t) for w, t in tg.items()})}
     # paths whose outcome is unknown although their start state exists (the continuation
     # gave up, or the landing failed): NaN there does not mean "does not snap"
     import numpy as np
@@ -171,7 +190,8 @@ def _cmd_phase_diagram(args):
     if args.json:
         print(json.dumps(rec))
     else:
-        print(f"wrote {rec['netcdf']} and {png} ({len(psis)} x {len(gaps)} points, {wall:.1f} s; "
+        grid = f"{len(s0s)} x " if len(s0s) > 1 else ""
+        print(f"wrote {rec['netcdf']} and {png} ({grid}{len(psis)} x {len(gaps)} points, {wall:.1f} s; "
               f"{len(rec['computed_chunks'])} chunks computed, the rest resumed)")
     if flagged:
         print("jaxrod phase-diagram: points not successful (codes in the NetCDF file): "
@@ -196,9 +216,10 @@ def register(sub):
     p.set_defaults(handler=_cmd_hysteresis)
 
     q = sub.add_parser("phase-diagram", help="alpha_c up/down over a grid of Psi0 and G/L (NetCDF + PNG)",
-                       description="Critical clamp angles of both snapping paths over Psi0 x G/L, one\n"
-                                   "compiled call per Psi0 (gaps in order, warm-started), or all Psi0 in one vmapped\n"
-                                   "call (--batch vmap). Writes DIR/phase_diagram.nc (xarray, NetCDF3) and\n"
+                       description="Critical clamp angles of both snapping paths over Psi0 x G/L (x s0 with\n"
+                                   "several --s0), one compiled call per Psi0 (gaps in order, warm-started), or all\n"
+                                   "Psi0 in one vmapped call (--batch vmap); with several fold widths each (s0, Psi0)\n"
+                                   "pair is one such call. Writes DIR/phase_diagram.nc (xarray, NetCDF3) and\n"
                                    "DIR/phase_diagram.png; an interrupted run resumes from DIR/chunks/. With several\n"
                                    "devices (GPUs, or processes joined by --coordinator) the Psi0 are split across\n"
                                    "them (--batch shard).",
@@ -207,7 +228,9 @@ def register(sub):
                    help="fold angles in degrees, comma list or START:STOP:STEP (default %(default)s)")
     q.add_argument("--gaps", default="0.1:0.9:0.02", metavar="LIST",
                    help="gaps G/L, comma list or START:STOP:STEP (default %(default)s)")
-    q.add_argument("--s0", type=float, default=DEFAULTS["s0"], help="fold width s0/L (default %(default)g)")
+    q.add_argument("--s0", default=f"{DEFAULTS['s0']:g}", metavar="LIST",
+                   help="fold width s0/L, or several (comma list or START:STOP:STEP): the grid gains an s0 axis, "
+                        "one panel per s0 in the figure (default %(default)s)")
     q.add_argument("--n", type=int, default=DEFAULTS["n"], help="number of segments (default %(default)d)")
     q.add_argument("--refine", type=float, default=DEFAULTS["refine"],
                    help="mesh refinement ratio at the crease (default %(default)g)")

@@ -247,39 +247,60 @@ def plot_phase_diagram(ds, path, termination_gaps=None, title=None):
     r"""Write the phase diagram of an `xarray.Dataset` from [`jaxrod.phase_diagram`][]
     like the paper's Fig. 2c: $\alpha_{c,\rm up}$ (above zero, filled circles) and
     $\alpha_{c,\rm down}$ (below zero, open circles) vs $G/L$, one colour per $\Psi_0$;
-    branch points marked with a cross. `termination_gaps`, a dict
-    `{psi0_deg: (G*_up, G*_down)}`, adds dashed vertical lines. **Returns:** `path`."""
+    branch points marked with a cross. A dataset with an `s0` dimension gets one panel per
+    fold width (up to three in a row, on a shared angle axis). `termination_gaps`, a dict
+    `{psi0_deg: (G*_up, G*_down)}` (with an `s0` dimension either that, for every panel, or
+    `{s0: {psi0_deg: (G*_up, G*_down)}}`, one per panel), adds dashed vertical lines.
+    **Returns:** `path`."""
     import matplotlib
 
-    fig = _agg_figure((7.5, 5.5))
-    ax = fig.add_subplot(1, 1, 1)
+    widths = [float(w) for w in ds["s0"].values] if "s0" in ds.dims else [None]
+    cols = min(len(widths), 3)
+    rows = -(-len(widths) // cols)
+    fig = _agg_figure((7.5, 5.5) if len(widths) == 1 else (5.0 * cols, 4.2 * rows + 0.4))
     cmap = matplotlib.colormaps["viridis"]
     psis = np.asarray(ds["psi0"].values, float)
     g = np.asarray(ds["gap"].values, float)
-    for i, psi in enumerate(psis):
-        c = cmap(i / max(len(psis) - 1, 1))
-        up = np.asarray(ds["alpha_c_up"].sel(psi0=psi).values, float)
-        dn = np.asarray(ds["alpha_c_down"].sel(psi0=psi).values, float)
-        ku = np.asarray(ds["kind_up"].sel(psi0=psi).values)
-        kd = np.asarray(ds["kind_down"].sel(psi0=psi).values)
-        ax.plot(g, up, "o-", color=c, markersize=4, linewidth=1.2, label=f"Ψ0 = {psi:g}°")
-        ax.plot(g, dn, "o--", color=c, markersize=4, markerfacecolor="white", linewidth=1.2)
-        for y, k in ((up, ku), (dn, kd)):
-            bp = k == 2
-            ax.plot(g[bp], y[bp], "x", color="k", markersize=4, linewidth=0.8)
-        if termination_gaps and psi in termination_gaps:
-            for gs, ls in zip(termination_gaps[psi], ("-.", ":")):
-                if gs is not None and np.isfinite(gs) and gs < 1.0:
-                    ax.axvline(gs, color=c, linestyle=ls, linewidth=1.0)
-    ax.axhline(0.0, color="0.3", linewidth=0.8)
-    ax.plot([], [], "x", color="k", label="branch point (else fold)")
-    if termination_gaps:
-        ax.plot([], [], "-.", color="0.4", label="G* snap up")
-        ax.plot([], [], ":", color="0.4", label="G* snap down")
-    ax.set_xlabel("G / L")
-    ax.set_ylabel("α_c (deg): snap up > 0, snap down < 0")
-    ax.grid(True, linewidth=0.3, alpha=0.5)
-    ax.legend(fontsize=8, loc="best", ncol=2)
-    ax.set_title(title or "critical clamp angles (symmetric actuation)", fontsize=10)
+    first = None
+    for j, w in enumerate(widths):
+        ax = fig.add_subplot(rows, cols, j + 1, sharey=first)
+        if first is None:
+            first = ax
+        sub = ds if w is None else ds.sel(s0=w)
+        tg = termination_gaps
+        if w is not None and tg and any(isinstance(v, dict) for v in tg.values()):
+            tg = tg.get(w)
+        for i, psi in enumerate(psis):
+            c = cmap(i / max(len(psis) - 1, 1))
+            up = np.asarray(sub["alpha_c_up"].sel(psi0=psi).values, float)
+            dn = np.asarray(sub["alpha_c_down"].sel(psi0=psi).values, float)
+            ku = np.asarray(sub["kind_up"].sel(psi0=psi).values)
+            kd = np.asarray(sub["kind_down"].sel(psi0=psi).values)
+            ax.plot(g, up, "o-", color=c, markersize=4, linewidth=1.2, label=f"Ψ0 = {psi:g}°")
+            ax.plot(g, dn, "o--", color=c, markersize=4, markerfacecolor="white", linewidth=1.2)
+            for y, k in ((up, ku), (dn, kd)):
+                bp = k == 2
+                ax.plot(g[bp], y[bp], "x", color="k", markersize=4, linewidth=0.8)
+            if tg and psi in tg:
+                for gs, ls in zip(tg[psi], ("-.", ":")):
+                    if gs is not None and np.isfinite(gs) and gs < 1.0:
+                        ax.axvline(gs, color=c, linestyle=ls, linewidth=1.0)
+        ax.axhline(0.0, color="0.3", linewidth=0.8)
+        ax.set_xlabel("G / L")
+        if j % cols == 0:
+            ax.set_ylabel("α_c (deg): snap up > 0, snap down < 0")
+        ax.grid(True, linewidth=0.3, alpha=0.5)
+        if j == 0:
+            ax.plot([], [], "x", color="k", label="branch point (else fold)")
+            if tg:
+                ax.plot([], [], "-.", color="0.4", label="G* snap up")
+                ax.plot([], [], ":", color="0.4", label="G* snap down")
+            ax.legend(fontsize=8, loc="best", ncol=2)
+        if w is None:
+            ax.set_title(title or "critical clamp angles (symmetric actuation)", fontsize=10)
+        else:
+            ax.set_title(f"s0/L = {w:g}", fontsize=10)
+    if widths[0] is not None:
+        fig.suptitle(title or "critical clamp angles (symmetric actuation)", fontsize=10)
     fig.tight_layout()
     return _save(fig, path)
