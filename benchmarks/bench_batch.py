@@ -48,11 +48,6 @@ loop of single `jr.solve_equilibrium` calls (result codes and fold heights compa
 each batch mode (`scan`, `vmap`, `shard`): first call (trace + compile + run) and a second
 call (the run), its numbers compared with `scan`'s.
 
-`batched.lower(scenes)` cannot be called as written: the `lower` attribute of jaxrod's `jit`
-wrapper is copied onto `jax.vmap(jr.snap_angles)` and `jax.jit(...)` by `functools.wraps` and
-shadows JAX's; the benchmark calls JAX's own (`jit_lower` below: `type(batched).lower(batched,
-scenes)`), the same program that `batched(scenes)` compiles.
-
 The batched program is compiled by `jax.jit` with XLA's default options: inside a JAX
 transformation jaxrod's entry points are plain `equinox.filter_jit` and take no options,
 whereas a single top-level `jr.snap_angles` call compiles with jaxrod's
@@ -314,17 +309,6 @@ def project_s(b, rows, repeats, loop_new, singles, min_exponent=1.0):
     return compile_est + repeats * run_est + loop_est
 
 
-def jit_lower(jitted, *args):
-    """`jitted.lower(*args)` for a `jax.jit` function: JAX's own `lower` (its class attribute).
-
-    `jax.jit(jax.vmap(jr.snap_angles)).lower` is jaxrod's `jit` wrapper's `lower` of the
-    unbatched `snap_angles`: `jax.vmap` and `jax.jit` copy the wrapped function's `__dict__`
-    (`functools.wraps`), and the copied `lower` attribute shadows `PjitFunction.lower`, so
-    `batched.lower(scenes)` traces the single call with batched scenes and fails (a carry shape
-    mismatch in `buckled_guess`). Calling `batched(scenes)` is unaffected."""
-    return type(jitted).lower(jitted, *args)
-
-
 def bench_snap_angles(batches, n, *, repeats=3, loop_cap=128, loop_max_batch=None, singles=None,
                       jaxrod_options=False, budget=None, min_exponent=1.0, on_row=None):
     """Rows of the snap-angle table (see the module docstring). `loop_cap`: most members looped
@@ -384,7 +368,7 @@ def bench_snap_angles(batches, n, *, repeats=3, loop_cap=128, loop_max_batch=Non
         for what, opts in variants:
             log(f"B = {b}: {what}: lower + compile")
             t0 = time.perf_counter()
-            lowered = jit_lower(batched, scenes)
+            lowered = batched.lower(scenes)
             t1 = time.perf_counter()
             compiled = lowered.compile(opts) if opts else lowered.compile()
             t2 = time.perf_counter()
