@@ -516,6 +516,18 @@ def test_scalar_s0_keeps_the_grid(chunks):
     assert _phase._chunk_path("d", 60.0) == os.path.join("d", "chunks", "psi0_60.nc")
 
 
+def _assert_width_equals(ds, w, ref):
+    """Every variable of `ds` at fold width `w` equals the single-width dataset `ref`: floats to
+    1e-9 deg with NaN in the same places, codes and kinds exactly."""
+    for k in _phase.VARIABLES:
+        a, b = ds[k].sel(s0=w).values, ref[k].values
+        if a.dtype.kind == "f":
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-9, err_msg=(w, k))
+            assert np.array_equal(np.isnan(a), np.isnan(b)), (w, k)
+        else:
+            np.testing.assert_array_equal(a, b, err_msg=(w, k))
+
+
 def test_s0_axis_equals_separate_phase_diagrams(chunks):
     """The real computation with an s0 axis (2 widths x 2 fold angles x the fixture's gaps,
     the chunk compiled for the fixture reused: s0 is traced) equals separate single-width
@@ -526,13 +538,7 @@ def test_s0_axis_equals_separate_phase_diagrams(chunks):
     assert ds["alpha_c_up"].dims == ("s0", "psi0", "gap")
     other = jr.phase_diagram(psis, PHASE_GAPS, s0=0.035, n=PHASE_N, progress=False)
     for w, ref in ((0.02, chunks.sel(psi0=psis)), (0.035, other)):
-        for k in _phase.VARIABLES:
-            a, b = ds[k].sel(s0=w).values, ref[k].values
-            if a.dtype.kind == "f":
-                np.testing.assert_allclose(a, b, rtol=0, atol=1e-9, err_msg=(w, k))
-                assert np.array_equal(np.isnan(a), np.isnan(b)), (w, k)
-            else:
-                np.testing.assert_array_equal(a, b, err_msg=(w, k))
+        _assert_width_equals(ds, w, ref)
     up = ds["alpha_c_up"].sel(psi0=60.0, gap=0.5).values
     assert np.all(np.isfinite(up)) and abs(up[1] - up[0]) > 1e-3
 
@@ -544,11 +550,4 @@ def test_s0_axis_as_one_vmapped_call():
     psis, gaps, widths = [30.0, 60.0], [0.3, 0.5, 0.8], [0.02, 0.035]
     vm = jr.phase_diagram(psis, gaps, s0=widths, n=24, batch="vmap", progress=False)
     for w in widths:
-        ref = jr.phase_diagram(psis, gaps, s0=w, n=24, batch="scan", progress=False)
-        for k in _phase.VARIABLES:
-            a, b = vm[k].sel(s0=w).values, ref[k].values
-            if a.dtype.kind == "f":
-                np.testing.assert_allclose(a, b, rtol=0, atol=1e-9, err_msg=(w, k))
-                assert np.array_equal(np.isnan(a), np.isnan(b)), (w, k)
-            else:
-                np.testing.assert_array_equal(a, b, err_msg=(w, k))
+        _assert_width_equals(vm, w, jr.phase_diagram(psis, gaps, s0=w, n=24, batch="scan", progress=False))
