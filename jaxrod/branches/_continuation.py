@@ -249,22 +249,9 @@ def _bordered_columns(Kmat, Flam, c, clam, Rt, Rm, Rs):
     return Dt + et, Dm + em, Dl + el, nu
 
 
-def _bordered_solve(Kmat, Flam, c, clam, r_t, r_m, r_s):
-    """Solve [[K, F_lam], [(c, 0)^T, clam]] (dt, dm, dlam) = (r_t, r_m, r_s) with one
-    step of iterative refinement (`_bordered_columns` with one column)."""
-    Dt, Dm, Dl, _ = _bordered_columns(Kmat, Flam, c, clam, r_t[:, None], r_m[:, None], jnp.reshape(r_s, (1,)))
-    return Dt[:, 0], Dm[:, 0], Dl[0]
-
-
 def _unit_tangent(zt, zm, zl, w):
     nrm = jnp.sqrt(jnp.sum(w * zt**2) + zl**2)
     return zt / nrm, zm / nrm, zl / nrm
-
-
-def _tangent(Kmat, Flam, c, clam, w):
-    zt, zm, zl = _bordered_solve(Kmat, Flam, c, clam, jnp.zeros_like(c), jnp.zeros_like(Flam[1]),
-                                 jnp.ones_like(clam))
-    return _unit_tangent(zt, zm, zl, w)
 
 
 def _step_and_tangent(Kmat, Flam, c, clam, g, rs, w):
@@ -282,65 +269,6 @@ def _residual_norm(g, scene):
     st = scene.strip
     return jnp.maximum(jnp.max(jnp.abs(g[0])) * st.length / st.bending_stiffness,
                        jnp.max(jnp.abs(g[1])) / st.length)
-
-
-def corrector(scene, parameter, x0, lam0, tau, ds, steps, tol, guess=None, finish=False, with_jacobian=False):
-    """Predict by `ds` along `tau` from (x0, lam0) and correct. Returns
-    (theta, mu, lam, converged, iterations); `converged` is False also where the corrected
-    point lies farther than |ds| from the prediction (in the arclength norm): a jump to
-    another branch. `guess` (theta, mu, lam): where Newton starts instead of the prediction
-    (the same equations, the hyperplane `ds` from (x0, lam0) along `tau`). `finish`
-    (static): take one more Newton step once the residual is below `tol`, which leaves the
-    point at round-off instead of up to `tol` off (the critical-point bracket of
-    `jaxrod.snap_angles` interpolates between two such points). `with_jacobian` (static):
-    also return `(K, F_lam)` of the last evaluation, which without `finish` is at the
-    returned point when it converged (the continuation's next tangent and Sturm count use
-    them instead of assembling them again)."""
-    F, F_lam, Kf = _pieces(scene, parameter)
-    d = discretize(scene)
-    w = d.h
-    t0, m0 = x0
-    tt, tm, tl = tau
-    tp, mp, lp = t0 + ds * tt, m0 + ds * tm, lam0 + ds * tl
-    c = w * tt
-
-    def body(carry):
-        t, m, lam, k, _, _, _ = carry
-        g = F(t, m, lam)
-        rs = jnp.dot(c, t - tp) + tl * (lam - lp)
-        Kmat = Kf(t, m, lam)
-        Flam = F_lam(t, m, lam)
-        dt, dm, dl = _bordered_solve(Kmat, Flam, c, tl, -g[0], -g[1], -rs)
-        res = _residual_norm(g, scene)
-        conv = (res <= tol) & (jnp.abs(rs) <= tol)
-        step = ~conv | finish
-        t = jnp.where(step, t + dt, t)
-        m = jnp.where(step, m + dm, m)
-        lam = jnp.where(step, lam + dl, lam)
-        return t, m, lam, k + 1, conv, conv & finish, (Kmat, Flam)
-
-    def cond(carry):
-        t, m, lam, k, conv, finished, _ = carry
-        finite = jnp.all(jnp.isfinite(t)) & jnp.isfinite(lam)
-        return ~(conv & (finished | (not finish))) & (k < steps) & finite
-
-    start = (tp, mp, lp) if guess is None else guess
-    false = jnp.zeros((), bool)
-    jac0 = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype),
-                        jax.eval_shape(lambda: (Kf(*start), F_lam(*start))))
-    t, m, lam, k, conv, _, jac = lax.while_loop(cond, body, (*start, jnp.zeros((), jnp.int32), false, false, jac0))
-    # a correction longer than the step itself left the branch for another one (at Psi0 =
-    # 60 deg, G/L = 0.075 with contact, a step of 0.025 landed 0.42 away, on an unstable
-    # branch 18 deg back): not converged, so the step is halved
-    far = jnp.sqrt(jnp.sum(w * (t - tp) ** 2) + (lam - lp) ** 2) > jnp.abs(ds)
-    if with_jacobian:
-        return t, m, lam, conv & ~far, k, jac
-    return t, m, lam, conv & ~far, k
-
-
-def _count(scene, parameter, t, m, lam):
-    _, _, Kf = _pieces(scene, parameter)
-    return kkt.count_below(Kf(t, m, lam), jnp.zeros(1, t.dtype))[0]
 
 
 def _check_bounds(name, bounds):

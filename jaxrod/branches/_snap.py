@@ -149,8 +149,8 @@ def _refine(scene, parameter, branch, settings, tol, bisections):
     # the critical point (whose critical mode tells the kind). Each correction starts from
     # the last stable state moved along the tangent to `s`, at most the bracket's width away
     # (the prediction from `a` is up to the whole step away), so it takes fewer Newton
-    # iterations to the same point. As `corrector(..., finish=True)`: Newton on the residual
-    # and the hyperplane `s` from `a` along the tangent, one more step once converged; a
+    # iterations to the same point. Each trial is a corrector: Newton on the residual and the
+    # hyperplane `s` from `a` along the tangent, with one more step once converged; a
     # point farther than `s` from its prediction has left the branch. One pass of the loop is
     # one Newton iteration, or the unstable count of a corrected point (from the same
     # bordered solve), so that under `vmap` each member goes from trial to trial on its own
