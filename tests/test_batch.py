@@ -283,8 +283,8 @@ def test_budget_changes_nothing_for_members_inside_it(budget, singles):
 
 def test_lower_compile_is_jaxs_own(batched, scenes, batch):
     """`jax.jit(jax.vmap(jr.snap_angles)).lower(scenes).compile()` works: `lower` is JAX's own
-    (it used to be jaxrod's `jit` wrapper's, copied onto the vmapped function by
-    `functools.wraps`, which traced the unbatched call with batched scenes and failed), and the
+    (an instance attribute `lower` on jaxrod's entry point would be copied onto the vmapped
+    function by `functools.wraps` and trace the unbatched call with batched scenes), and the
     compiled program gives the plain batched call's numbers to the last bit."""
     assert "lower" not in getattr(batched, "__dict__", {})  # nothing shadows PjitFunction.lower
     lowered = batched.lower(scenes)
