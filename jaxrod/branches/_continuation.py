@@ -226,10 +226,10 @@ def _pieces(scene, parameter):
 
 
 def _bordered_columns(Kmat, Flam, c, clam, Rt, Rm, Rs):
-    """Solve [[K, F_lam], [(c, 0)^T, clam]] (dt, dm, dlam) = (r_t, r_m, r_s) for k right-hand
+    r"""Solve [[K, F_lam], [(c, 0)^T, clam]] (dt, dm, dlam) = (r_t, r_m, r_s) for k right-hand
     sides at once (`Rt` (N, k), `Rm` (2, k), `Rs` (k,)), with one step of iterative
     refinement: two structured solves of k + 1 columns in all (`kkt.solve_columns`), the
-    column $K^{-1}F_\\lambda$ of the first reused by the second. Returns `(Dt, Dm, Dl, nu)`,
+    column $K^{-1}F_\lambda$ of the first reused by the second. Returns `(Dt, Dm, Dl, nu)`,
     `nu` the unstable count $\nu(0)$ of `Kmat`."""
     k = Rt.shape[1]
     A, B, nu = kkt.solve_columns(Kmat, jnp.concatenate([Rt, Flam[0][:, None]], axis=1),
@@ -255,7 +255,7 @@ def _unit_tangent(zt, zm, zl, w):
 
 
 def _step_and_tangent(Kmat, Flam, c, clam, g, rs, w):
-    """The corrector's Newton step for the residual `(g, rs)` and the unit tangent of the
+    r"""The corrector's Newton step for the residual `(g, rs)` and the unit tangent of the
     bordered matrix (right-hand side (0, 0, 1)), as two columns of one bordered solve, and
     $\nu(0)$ of `Kmat`: `((dt, dm, dl), (nt, nm, nl), nu)`."""
     Rt = jnp.stack([-g[0], jnp.zeros_like(g[0])], axis=1)

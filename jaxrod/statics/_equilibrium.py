@@ -97,7 +97,7 @@ def newton_start(theta0, mu0):
 
 
 def newton_iteration(scene, solver: Newton, c, d=None, count=False):
-    """One iteration of `solver` on `scene` from the Newton state `c` (`newton_start`):
+    r"""One iteration of `solver` on `scene` from the Newton state `c` (`newton_start`):
     the residual at the current iterate, and where it is above tolerance the (globalized)
     Newton step. Returns the next state, whose `done` says the solve has ended and `result`
     how (`successful` once converged, or why it stopped). With `count=True` also
