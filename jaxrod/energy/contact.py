@@ -46,8 +46,10 @@ the screen pass whenever the angle range is below $\pi$ and the mesh is not too 
 state that fails it (a folded strip often turns by more than $\pi$) meets a second screen:
 if every two segments $|i-j|\ge$ `min_separation` have axis-aligned bounding boxes more than
 `tol` apart along $x$ or $y$, no two are within `tol` (four comparisons per pair, about a
-tenth of the distance computation's cost). Only states that fail both screens (parts of the
-strip close to each other) pay for the $O(N^2)$ distances and intersection tests.
+tenth of the distance computation's cost). Only the pairs whose boxes come within `tol` can
+be within `tol`: the distances and intersection tests run on the first `OVERLAP_PAIRS` of them
+(in a tight fold, a few segments on either side of the crease), and on every pair only where
+more overlap.
 
 **Contact energy.** With `scene.contact` (a `jaxrod.Contact`), node $p$ and segment $j$
 interact when segment $j$ lies more than `exclusion` $\cdot L$ of arclength from node $p$
