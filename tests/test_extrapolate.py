@@ -168,12 +168,16 @@ def test_extrapolated_gradient_is_the_same_combination():
 @pytest.mark.parametrize("psi0, gap", [(60.0, 0.5), (30.0, 0.6), (180.0, 0.3)])
 def test_post_snap_stage_changes_no_angle(psi0, gap):
     """The default skips the landed branch after each snap: the same angles, landed states
-    and codes as with it (30 deg, 0.6: the up path starts from the down path's end)."""
+    and codes as with it (30 deg, 0.6: the up path starts from the down path's end). The
+    numbers agree to round-off, not bit for bit: with and without the stage are two compiled
+    programs, which XLA fuses differently (1 ulp seen); the codes agree exactly."""
     sc = jr.make_scene(psi0, gap, 0.0, n=24)
     a, b = jr.snap_angles_extrapolated(sc), jr.snap_angles_extrapolated(sc, continue_after_snap=True)
     for p in ("up", "down"):
         x, y = getattr(a, p), getattr(b, p)
         for f in ("alpha_c", "fold_height_before", "fold_height_after", "error"):
-            np.testing.assert_array_equal(np.asarray(getattr(x, f)), np.asarray(getattr(y, f)))
+            u, v = np.asarray(getattr(x, f)), np.asarray(getattr(y, f))
+            np.testing.assert_allclose(u, v, rtol=1e-13, atol=1e-15, err_msg=(p, f))
+            assert np.array_equal(np.isnan(u), np.isnan(v)), (p, f)
         assert x.result == y.result and x.start_result == y.start_result
     assert int(a.fine.up.branch.count[1]) == 0 or int(a.fine.up.stage) == 1
