@@ -353,8 +353,8 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
     def predicted(t, m, lam, tau, ds):
         return t + ds * tau[0], m + ds * tau[1], lam + ds * tau[2]
 
-    # One pass of the loop is one corrector iteration (as `corrector`: the residual at the
-    # iterate, and where it is above tolerance the Newton step on the bordered system); the
+    # One pass of the loop is one corrector iteration (the residual at the iterate, and where
+    # it is above tolerance the Newton step on the bordered system of the module docstring); the
     # pass whose iteration decides the step (converged, or given up after `steps` iterations
     # or at a non-finite iterate) also records the point, takes the new tangent and unstable
     # count from the same bordered solve (two more columns of it) and predicts the next
