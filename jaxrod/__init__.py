@@ -119,6 +119,8 @@ _DYNAMICS = (
     "brink",
     "Dissipation",
     "Protocol",
+    "HHT",
+    "Rattle",
     "ramp",
     "simulate",
     "snap_dynamics",
@@ -146,6 +148,8 @@ if TYPE_CHECKING:
     from .dynamics import brink as brink
     from .dynamics import Dissipation as Dissipation
     from .dynamics import Protocol as Protocol
+    from .dynamics import HHT as HHT
+    from .dynamics import Rattle as Rattle
     from .dynamics import ramp as ramp
     from .dynamics import simulate as simulate
     from .dynamics import snap_dynamics as snap_dynamics

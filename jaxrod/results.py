@@ -107,6 +107,14 @@ class RESULTS(eqx.Enumeration):
         "zero): the impact is too fast for the contact law. Raise Bodies(stiffness=...) or thickness, or "
         "slow the program."
     )
+    newton_failed = (
+        "The implicit step's Newton iteration did not converge at the fixed step dt, and the run was "
+        "stopped there: lower dt, or let jaxrod.HHT choose the step (dt=None)."
+    )
+    step_underflow = (
+        "The implicit integrator's step fell below its minimum (1e-12 T): Newton did not converge or the "
+        "error test failed at every step size tried. Raise HHT(tol=...) or newton_iters, or check the scene."
+    )
 
 
 def result_name(code) -> str:

@@ -1,7 +1,7 @@
 """Motion: the strip's equations of motion, integrators, scenes and the snap speed.
 
 Lagrange's equations of the discrete strip with its inextensible links (`simulate`, RATTLE
-by default, any diffrax solver), clamp programs (`Protocol`), dissipation (`Dissipation`),
+by default (`Rattle`), the implicit `HHT`, any diffrax solver), clamp programs (`Protocol`), dissipation (`Dissipation`),
 the ready-made scenes (`snap_dynamics`: brink, ramp, asymmetric) and the snap speed of a
 design (`snap_speed`) and its map over fold angles and gaps (`speed_plane`, run across
 devices by `jaxrod.sweeps`), and the strip as an actuator: piecewise-linear clamp
@@ -22,8 +22,10 @@ from ._bodies import Floor as Floor
 from ._bodies import Table as Table
 from ._equations import Dissipation as Dissipation
 from ._equations import Protocol as Protocol
+from ._implicit import HHT as HHT
 from ._program import hold_and_move as hold_and_move
 from ._program import Program as Program
+from ._rattle import Rattle as Rattle
 from ._scenes import brink as brink
 from ._scenes import NUDGE as NUDGE
 from ._scenes import nudge_start as nudge_start

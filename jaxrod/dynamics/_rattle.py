@@ -48,6 +48,8 @@ import diffrax as dfx
 import jax.numpy as jnp
 from jax import lax
 
+import equinox as eqx
+
 from ._equations import applied_forces, inverse_node_mass, kinematics, link_pairs
 from ..linalg.batched import tridiagonal_solve
 
@@ -167,7 +169,7 @@ class FixedStepRattle(dfx.AbstractSolver):
         return terms.vf(t0, y0, args)
 
 
-class Rattle(FixedStepRattle):
+class RattleStep(FixedStepRattle):
     """RATTLE for jaxrod's strip (module docstring). Needs `simulate`'s `args`
     `(scene, protocol, dissipation, baumgarte, d)`; `baumgarte` is unused (the end
     conditions are exact)."""
@@ -210,3 +212,28 @@ class Rattle(FixedStepRattle):
         f1, p1 = rattle_forces(t1, th1, omh, x1, vh, args)
         v1 = project_velocity(x1, vh + 0.5 * dt * invm[:, None] * f1, invm)
         return w0 + 0.5 * dt * (p0 + p1), (x1, v1, th1, f1, p1, mu), converged
+
+
+class Rattle(eqx.Module):
+    r"""Settings of RATTLE (the module docstring) for [`jaxrod.simulate`][] and the verbs built on it.
+
+    **Arguments:** `courant` the step as $\Delta t\le$ `courant`$\,(h_{\min}/L)^2\,T$, in
+    (0, 0.5), RATTLE's stability limit being 0.5 (default: 0.45 when the run stops at the
+    snap, `RING_COURANT` = 0.05 past it); `substeps` RATTLE steps per diffrax step (default 4
+    at the automatic step, 1 with a given `dt`). Fixed steps: the step is set by the
+    stiffest bending mode, so its count grows like $N^2$ (see [`jaxrod.HHT`][] for a step set
+    by accuracy)."""
+
+    courant: float | None = None
+    substeps: int | None = None
+
+    def __check_init__(self):
+        from .._misc import check_number
+
+        if self.courant is not None:
+            check_number("courant", self.courant, lo=0.0, hi=0.5)
+            if not 0.0 < float(self.courant) < 0.5:
+                raise ValueError(f"courant must lie in (0, 0.5) (RATTLE's stability limit), got {self.courant!r}")
+        if self.substeps is not None and (isinstance(self.substeps, bool) or not isinstance(self.substeps, int)
+                                          or self.substeps < 1):
+            raise ValueError(f"substeps must be a positive integer, got {self.substeps!r}")

@@ -1,20 +1,22 @@
 r"""Time integration of the snap with diffrax: solvers, events, the sampled trajectory.
 
 `simulate` integrates $y=((\theta,\dot\theta), W)$ where $W(t)=\int_0^t \partial_tV\,dt$ is the
-work done by the rotating clamps (so $E_k+V-W$ is conserved when undamped), with
+work done by the rotating clamps (so $E_k+V-W$ is conserved when undamped), with a solver
+given as a strategy object:
 
-* `"rattle"` (default): RATTLE in the Cartesian node coordinates of the link chain
-  (`jaxrod.dynamics._rattle`): symplectic, second order, link lengths and both ends exact, one
-  bending gradient per fixed step just below its stability limit $\omega_{\max}\Delta t<2$;
-* an explicit adaptive Runge-Kutta scheme (`"tsit5"`, `"dopri5"`, `"dopri8"`), or
-* an implicit (L-stable ESDIRK) scheme, `"kvaerno5"` / `"kvaerno3"` (Newton with the dense
-  Jacobian of the vector field, which damps the highest bending modes),
+* [`jaxrod.Rattle`][] (default, also `"rattle"`): RATTLE in the Cartesian node coordinates of
+  the link chain (`jaxrod.dynamics._rattle`): symplectic, second order, link lengths and both
+  ends exact, one bending gradient per fixed step just below its stability limit
+  $\omega_{\max}\Delta t<2$, $\omega_{\max}=4\sqrt{B/\lambda}/h^2$: the step count grows like $N^2$;
+* [`jaxrod.HHT`][]: the implicit HHT-$\alpha$ method on the angles (`jaxrod.dynamics._implicit`),
+  Newton along the chain in $O(N)$ per iteration, its step set by a local error test on the
+  node positions rather than by the stiffest mode;
+* any diffrax solver instance, or the strings `"tsit5"`, `"dopri5"`, `"dopri8"` (explicit
+  adaptive Runge-Kutta) and `"kvaerno3"`, `"kvaerno5"` (ESDIRK, dense-Jacobian Newton),
+  adaptive with a PID step-size controller (`rtol`, `atol`).
 
-the adaptive ones with a PID step-size controller (`rtol`, `atol`). Measured on the brink
-snap (benchmarks/results/dynamics.md): the undamped strip rings in its highest bending
-modes, so even the implicit schemes take about as many steps as the explicit ones at
-useful tolerances, and the adaptive explicit schemes sit at their stability limit; RATTLE
-takes fewer, cheaper steps for the same $v_s$ accuracy. A boolean diffrax `Event` stops the run
+The trade between them is measured in benchmarks/results/implicit.md and dynamics.md.
+A boolean diffrax `Event` stops the run
 once the snap is over: the fold node has crossed $y=0$ in the snapping direction and then
 reversed its vertical velocity (its first overshoot), or at `t1`.
 
@@ -22,7 +24,10 @@ Observables (fold height, fold velocity, energies) are saved on a fine uniform g
 `n_fine` times on $[0,t_1]$ (scalars only, cheap; default 16384, for RATTLE one per diffrax step, i.e. every `substeps` RATTLE steps); angles and node speeds on `n_frames`
 times (the chronophotography and the speed map $v(s,t)$). The snapping speed
 $v_s=\max_t|\dot{\mathbf x}(L/2,t)|$ is the grid maximum refined by the parabola through the
-seven samples around it, maximized (`_refine_peak`; the three-point parabola used before
+seven samples around it, maximized (`_refine_peak`), over the snap: up to its first
+overshoot, the first sample past the crossing whose vertical fold velocity turns back
+(`Trajectory.v_peak` is the whole run's peak, which past the snap includes the slam and
+the ringing; the three-point parabola used before
 was biased by $2.8\times10^{-4}$ with 4096 samples on $[0,4T]$ for a brink snap of width
 $\sim0.016T$, and its bias wiggled with the peak's position between samples, which spoilt
 the gradient; keep $t_1$ close to the snap time); it is a smooth function of the parameters where the maximum is unique (the
@@ -43,7 +48,8 @@ import numpy as np
 from ._equations import (Dissipation, Protocol, accelerations, check_run_settings, check_scene, kinetic_energy, observables, potential_energy, scene_at)
 from .._misc import dynamics_jit
 from ..energy.geometry import discretize
-from ._rattle import Rattle
+from ._implicit import HHT
+from ._rattle import Rattle, RattleStep
 from ..results import RESULTS
 
 
@@ -53,7 +59,7 @@ SOLVERS = {
     "dopri8": dfx.Dopri8,
     "kvaerno3": dfx.Kvaerno3,
     "kvaerno5": dfx.Kvaerno5,
-    "rattle": Rattle,
+    "rattle": RattleStep,
 }
 EXPLICIT = ("tsit5", "dopri5", "dopri8", "rattle")
 FIXED_STEP = ("rattle",)
@@ -67,8 +73,9 @@ class Trajectory(eqx.Module):
     Frames `t_frames` (n_frames,): `theta` (n_frames, N), `positions` (n_frames, N+1, 2),
     `speed` (n_frames, N+1) node speeds. Each crease (`Strip.crease_list` order, m of them):
     `crease_height`, `crease_speed` (n_fine, m) and `v_s_creases` (m,), its peak speed.
-    Scalars: `v_s` (peak fold speed at L/2, units of the
-    scene, i.e. v* when L = B = lambda = 1), `t_peak`, `t_cross` (fold height crosses 0),
+    Scalars: `v_s` (the snap's peak fold speed at L/2, up to its first overshoot, units of
+    the scene, i.e. v* when L = B = lambda = 1), `t_peak`, `v_peak` (the whole run's peak
+    fold speed, the same as `v_s` for a run that stops at the snap), `t_cross` (fold height crosses 0),
     `t_end`, `snapped`, `kinetic_peak`, `energy_drift` (max |E_k+V-W - E(0)| / V(0), NaN when
     damped), `num_steps`, `result` (a [`jaxrod.RESULTS`][] code: `successful` for a run that
     reached `t1` or ended at the snap; `energy_drift`, `constraint_drift`,
@@ -90,6 +97,7 @@ class Trajectory(eqx.Module):
     speed: jax.Array
     v_s: jax.Array
     t_peak: jax.Array
+    v_peak: jax.Array
     crease_height: jax.Array
     crease_speed: jax.Array
     v_s_creases: jax.Array
@@ -115,7 +123,7 @@ _U = np.arange(-_PEAK_HALF, _PEAK_HALF + 1, dtype=float)
 _VINV = np.linalg.inv(np.vander(_U, increasing=True))  # samples -> monomial coefficients in u
 
 
-def _refine_peak(t, f):
+def _refine_peak(t, f, upto=None):
     r"""Maximum of samples f on the uniform grid t: the degree-6 polynomial through the 7
     samples around the largest one, maximized by Newton on its derivative (u in samples).
 
@@ -126,7 +134,8 @@ def _refine_peak(t, f):
     $O((\Delta t/w)^7)$. Falls back to the parabola next to non-finite samples (the stop)."""
     f = jnp.where(jnp.isfinite(f), f, -jnp.inf)
     k = _PEAK_HALF
-    i = jnp.clip(jnp.argmax(f), k, f.shape[0] - 1 - k)
+    pick = f if upto is None else jnp.where(jnp.arange(f.shape[0]) <= upto, f, -jnp.inf)
+    i = jnp.clip(jnp.argmax(pick), k, f.shape[0] - 1 - k)
     win = jax.lax.dynamic_slice(f, (i - k,), (2 * k + 1,))
     ok7 = jnp.all(jnp.isfinite(win))
     fm, f0, fp = win[k - 1], win[k], win[k + 1]
@@ -171,6 +180,12 @@ DT_CAP = 2e-4
 # RING_COURANT h^2 (capped at DT_CAP): energy error 4.0e-3 over 5.6 T at N = 50, 3.6e-3 over 6 T at N = 100
 # (tests/test_long_horizon.py), at 9x the steps of the snap's own step.
 RING_COURANT = 0.05
+# `jaxrod.HHT`'s default number of fine-grid samples: its dense output is a cubic Hermite
+# interpolant, and 4096 samples on [0, 2 T] put ~30 on the brink snap's speed peak (16384 cost
+# 18 % more time at N = 100 for the same v_s to 1e-5).
+HHT_N_FINE = 4096
+# The longest fixed-step RATTLE run `simulate` starts (a larger t1 is refused, naming t1).
+MAX_FIXED_STEPS = 10**8
 # RATTLE steps per diffrax step at the automatic step (see `simulate`).
 DEFAULT_SUBSTEPS = 4
 
@@ -213,13 +228,40 @@ def _default_n_fine(scene, solver, dt, t1, courant, substeps=1):
     return int(min(max(math.ceil(t1 / (substeps * _rattle_dt_natural(scene, courant))) + 1, 2048), 2**19))
 
 
-def _verdict(sol, finite):
+def _resolve_solver(solver, courant, substeps):
+    """`simulate`'s `solver` as `(key, strategy, courant, substeps)`: key "rattle" (a
+    [`jaxrod.Rattle`][] or the string), "hht" (a [`jaxrod.HHT`][]), "custom" (a diffrax
+    solver) or another key of `SOLVERS`; a `Rattle`'s settings merged with the keywords."""
+    if isinstance(solver, Rattle):
+        for name, mine, kw in (("courant", solver.courant, courant), ("substeps", solver.substeps, substeps)):
+            if mine is not None and kw is not None and mine != kw:
+                raise ValueError(f"{name}: given both as Rattle({name}={mine!r}) and as {name}={kw!r}")
+        courant = solver.courant if courant is None else courant
+        substeps = solver.substeps if substeps is None else substeps
+        return "rattle", solver, courant, substeps
+    if isinstance(solver, HHT):
+        key = "hht"
+    elif isinstance(solver, dfx.AbstractSolver):
+        key = "custom"
+    elif isinstance(solver, str) and solver in SOLVERS:
+        key = solver
+    else:
+        raise ValueError(f"solver must be jaxrod.Rattle(...), jaxrod.HHT(...), a diffrax solver or one of "
+                         f"{sorted(SOLVERS)}, got {solver!r}")
+    if courant is not None and key != "rattle":
+        raise ValueError(f"courant applies to RATTLE only, got solver={solver!r}")
+    return key, solver, courant, substeps
+
+
+def _verdict(sol, finite, implicit=False):
     """jaxrod's code for a diffrax solution whose event is (snap done, energy bad, end bad)
     (see `Trajectory.result`)."""
     sr = sol.result
     res = RESULTS.where(sr == dfx.RESULTS.successful, RESULTS.successful, RESULTS.integration_failed)
     res = RESULTS.where(sr == dfx.RESULTS.max_steps_reached, RESULTS.steps_exhausted, res)
-    res = RESULTS.where(sr == dfx.RESULTS.nonlinear_divergence, RESULTS.constraint_solve_failed, res)
+    res = RESULTS.where(sr == dfx.RESULTS.nonlinear_divergence,
+                        RESULTS.newton_failed if implicit else RESULTS.constraint_solve_failed, res)
+    res = RESULTS.where(sr == dfx.RESULTS.dt_min_reached, RESULTS.step_underflow, res)
     _, energy_bad, constraint_bad = sol.event_mask
     on_event = RESULTS.where(energy_bad, RESULTS.energy_drift,
                              RESULTS.where(constraint_bad, RESULTS.constraint_drift, RESULTS.successful))
@@ -229,7 +271,7 @@ def _verdict(sol, finite):
 
 @dynamics_jit
 def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, direction=1.0,
-             stop_at_snap: bool = True, solver: str = "rattle", rtol=1e-8, atol=1e-8, dt=None,
+             stop_at_snap: bool = True, solver="rattle", rtol=1e-8, atol=1e-8, dt=None,
              dissipation: Dissipation | None = None, baumgarte=20.0, n_fine: int | None = None,
              n_frames: int = 64, frame_window=None, max_steps: int | None = None,
              courant: float | None = None, substeps: int | None = None, energy_tol=1e-2,
@@ -238,8 +280,9 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     clamp `protocol` for $t\in[0,t_1]$ (see the module docstring).
 
     **Arguments:** `direction` +1 for a snap up (fold height rising through 0), -1 down;
-    `stop_at_snap` stop at the first overshoot after the crossing; `solver` a key of
-    `SOLVERS` (default `"rattle"`, fixed steps); `rtol`, `atol` the PID controller's
+    `stop_at_snap` stop at the first overshoot after the crossing; `solver` a
+    [`jaxrod.Rattle`][] (default, fixed steps), a [`jaxrod.HHT`][] (implicit, adaptive steps), a
+    diffrax solver, or a key of `SOLVERS`; `rtol`, `atol` the PID controller's
     tolerances of the adaptive solvers, or `dt` a constant step (then no error control); `baumgarte` $\Omega$ of the end-condition stabilization;
     `frame_window` (t_a, t_b) the span of the `n_frames` frames (default (0, t1));
     `courant` (`"rattle"` only, when `dt` is None): the step is the largest
@@ -278,14 +321,13 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
                        frame_window=frame_window, max_steps=max_steps, courant=courant,
                        energy_tol=energy_tol, constraint_tol=constraint_tol)
     check_scene(scene)
+    solver, strategy, courant, substeps = _resolve_solver(solver, courant, substeps)
     if substeps is None:
         substeps = DEFAULT_SUBSTEPS if (solver == "rattle" and dt is None) else 1
     if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
         raise ValueError(f"substeps must be a positive integer, got {substeps!r}")
     if substeps > 1 and solver != "rattle":
-        raise ValueError(f"substeps applies to solver='rattle' only, got solver={solver!r}")
-    if solver not in SOLVERS:
-        raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {solver!r}")
+        raise ValueError(f"substeps applies to RATTLE only, got solver={strategy!r}")
     dtype = jnp.result_type(theta0)
     from ..energy.geometry import scene_dtype
 
@@ -300,7 +342,7 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     if courant is None:
         courant = 0.45 if stop_at_snap else RING_COURANT
     if n_fine is None:
-        n_fine = _default_n_fine(scene, solver, dt, t1, courant, substeps)
+        n_fine = HHT_N_FINE if solver == "hht" else _default_n_fine(scene, solver, dt, t1, courant, substeps)
     ts = jnp.linspace(0.0, t1, n_fine)
     if frame_window is None:
         frame_window = (0.0, t1)
@@ -360,22 +402,34 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
         dt_max = substeps * _rattle_dt_natural(scene, courant) * T
         grid = t1 / (n_fine - 1)
         dt = grid / jnp.ceil(grid / dt_max)
+        steps = 0
+        if isinstance(t1, (int, float)):  # natural units L = B = lambda = 1
+            g = t1 / (n_fine - 1)
+            steps = (n_fine - 1) * math.ceil(g / (substeps * _rattle_dt_natural(scene, courant)))
+        if steps > MAX_FIXED_STEPS:
+            raise ValueError(f"t1: a RATTLE run to t1 = {t1!r} takes {steps:.3g} fixed steps (more than "
+                             f"{MAX_FIXED_STEPS:.0e}); shorten t1, or use solver=jaxrod.HHT() whose step is set "
+                             "by accuracy")
         if max_steps is None:
-            steps = 0
-            if isinstance(t1, (int, float)):  # natural units L = B = lambda = 1
-                g = t1 / (n_fine - 1)
-                steps = (n_fine - 1) * math.ceil(g / (substeps * _rattle_dt_natural(scene, courant)))
             max_steps = max(200_000, steps + 64)
     if max_steps is None:
         max_steps = 200_000
-    if dt is None:
+    T = st.length**2 * jnp.sqrt(st.line_density / st.bending_stiffness)
+    if solver == "hht" and dt is None:
+        controller = strategy.controller(dtmin=1e-12 * T)
+        dt0 = strategy.dt0 * T
+    elif dt is None:
         controller = dfx.PIDController(rtol=rtol, atol=atol, pcoeff=0.0, icoeff=1.0)
         dt0 = None
     else:
         controller = dfx.ConstantStepSize()
         dt0 = dt
-    if solver == "rattle":
-        slv = Rattle(substeps=substeps)
+    if solver == "hht":
+        slv = strategy.step_solver()
+    elif solver == "custom":
+        slv = strategy
+    elif solver == "rattle":
+        slv = RattleStep(substeps=substeps)
     elif solver in EXPLICIT:
         slv = SOLVERS[solver]()
     else:
@@ -385,11 +439,6 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     o, fr = sol.ys
     t_end = jnp.max(jnp.where(jnp.isfinite(sol.ts[0]), sol.ts[0], 0.0))
     t_end = jnp.maximum(t_end, 0.0)
-    v_s, t_peak = _refine_peak(ts, o["fold_speed"])
-    if scene.strip.creases is None:  # the centred crease's speed is the fold's
-        v_s_creases = v_s[None]
-    else:
-        v_s_creases = jax.vmap(lambda f: _refine_peak(ts, f)[0], in_axes=1)(o["crease_speed"])
     fh = o["fold_height"]
     # first crossing of the fold height through 0 in the snapping direction
     s = direction * fh
@@ -398,6 +447,17 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     frac = s[j] / jnp.where(cross[j], s[j] - s[j + 1], 1.0)
     t_cross = jnp.where(jnp.any(cross), ts[j] - frac * (ts[1] - ts[0]), jnp.nan)
     snapped = jnp.any(cross)
+    # the snap ends at its first overshoot: the first sample past the crossing whose vertical
+    # fold velocity has turned back (the whole run where there is none)
+    idx = jnp.arange(ts.shape[0])
+    back = (idx > j + 1) & (direction * o["vy"] < 0.0) & snapped
+    upto = jnp.where(jnp.any(back), jnp.argmax(back), ts.shape[0] - 1)
+    v_s, t_peak = _refine_peak(ts, o["fold_speed"], upto)
+    v_peak, _ = _refine_peak(ts, o["fold_speed"])
+    if scene.strip.creases is None:  # the centred crease's speed is the fold's
+        v_s_creases = v_s[None]
+    else:
+        v_s_creases = jax.vmap(lambda f: _refine_peak(ts, f, upto)[0], in_axes=1)(o["crease_speed"])
     E = o["kinetic"] + o["potential"] - o["work"]
     fin = jnp.isfinite(E)
     drift = jnp.max(jnp.where(fin, jnp.abs(E - E[0]), 0.0)) / jnp.abs(o["potential"][0])
@@ -406,10 +466,10 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     return Trajectory(
         t=ts, fold_height=fh, fold_speed=o["fold_speed"], bending=o["bending"], potential=o["potential"],
         kinetic=o["kinetic"], clamp_work=o["work"], constraint=o["constraint"], t_frames=tf,
-        theta=fr["theta"], positions=fr["positions"], speed=fr["speed"], v_s=v_s, t_peak=t_peak,
+        theta=fr["theta"], positions=fr["positions"], speed=fr["speed"], v_s=v_s, t_peak=t_peak, v_peak=v_peak,
         crease_height=o["crease_height"], crease_speed=o["crease_speed"], v_s_creases=v_s_creases,
         t_cross=t_cross, t_end=t_end, snapped=snapped, kinetic_peak=jnp.max(kin), energy_drift=drift,
         num_steps=sol.stats["num_steps"] * substeps,  # RATTLE steps (substeps: 1 otherwise)
-        result=_verdict(sol, jnp.all(jnp.where(jnp.isfinite(sol.ts[0]), jnp.isfinite(E), True))),
+        result=_verdict(sol, jnp.all(jnp.where(jnp.isfinite(sol.ts[0]), jnp.isfinite(E), True)), solver == "hht"),
         solver_result=sol.result,
     )
