@@ -117,6 +117,9 @@ _DYNAMICS = (
     "Program",
     "Table",
     "brink",
+    "Brink",
+    "Asymmetric",
+    "Ramp",
     "Dissipation",
     "Protocol",
     "HHT",
@@ -146,6 +149,9 @@ if TYPE_CHECKING:
     from .dynamics import Program as Program
     from .dynamics import Table as Table
     from .dynamics import brink as brink
+    from .dynamics import Brink as Brink
+    from .dynamics import Asymmetric as Asymmetric
+    from .dynamics import Ramp as Ramp
     from .dynamics import Dissipation as Dissipation
     from .dynamics import Protocol as Protocol
     from .dynamics import HHT as HHT

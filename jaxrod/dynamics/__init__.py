@@ -26,10 +26,13 @@ from ._implicit import HHT as HHT
 from ._program import hold_and_move as hold_and_move
 from ._program import Program as Program
 from ._rattle import Rattle as Rattle
+from ._scenes import Asymmetric as Asymmetric
 from ._scenes import brink as brink
+from ._scenes import Brink as Brink
 from ._scenes import NUDGE as NUDGE
 from ._scenes import nudge_start as nudge_start
 from ._scenes import ramp as ramp
+from ._scenes import Ramp as Ramp
 from ._scenes import snap_dynamics as snap_dynamics
 from ._scenes import Start as Start
 from ._simulate import simulate as simulate

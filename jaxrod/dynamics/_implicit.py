@@ -18,23 +18,29 @@ $$\theta_1=\theta_0+\Delta t\,\dot\theta_0+\Delta t^2\big((\tfrac12-\beta)\ddot\
 
 and solves $\text{inertia}_1+(1+\alpha)(\mathbf F+V^\top\boldsymbol\lambda)_1-\alpha(\mathbf F+V^\top\boldsymbol\lambda)_0=0$,
 $\mathbf g(\theta_1)=0$ (the end condition exact at every step). $\alpha=0$ is the
-trapezoidal rule (average acceleration): second order, unconditionally stable, no
-numerical dissipation (it conserves the energy of the linear bending waves exactly);
-$\alpha<0$ damps the grid-scale bending modes ($\rho_\infty=(1+\alpha)/(1-\alpha)$) and
-leaves the slow motion second-order accurate. The step is not bound by the stiffest mode:
+trapezoidal rule (average acceleration): second order, without numerical dissipation,
+and unconditionally stable on linear problems only: on the strip's rotating chain its
+energy can grow (measured on the brink snap at N = 100 with a fixed step $10^{-4}T$: the
+energy monitor stops it during the snap). $\alpha<0$ damps the grid-scale bending modes
+($\rho_\infty=(1+\alpha)/(1-\alpha)$) and leaves the slow motion second-order accurate. The step is not bound by the stiffest mode:
 the bending energy is quadratic in $\theta$, so its Hessian $D^\top\mathrm{diag}(B/\ell)D$ is
 exact in Newton's matrix.
 
-**Newton.** Unknown $\theta_1$, matrix
-$M/(\beta\Delta t^2)+\gamma C/(\beta\Delta t)+(1+\alpha)(D^\top\tfrac B\ell D+\mathrm{diag}\,d)$:
-the chain's mass $M=J^\top mJ$, the bending and hinge-viscosity Hessians exactly, and the
-diagonal of the remaining geometric terms ($d_i=-h_i\mathbf t_i\cdot(\mathbf P_i+\boldsymbol\lambda-\mathbf S_i)$,
-$\mathbf P_i$, $\mathbf S_i$ the tail sums of the nodes' inertial and applied forces), bordered by
-the end condition; `jaxrod.linalg.chain.chain_solve` solves it in $O(N)$ without forming
-$M$. The neglected off-diagonal geometric terms make it a quasi-Newton iteration whose
-contraction is $O(\Delta t^2\dot\theta^2)$: a fixed number `newton_iters` of iterations,
-after which the end condition, the update and the residual must be below `newton_tol`,
-else the step is rejected and retried shorter.
+**Newton.** Unknown $\theta_1$ ($\ddot\theta_1$ and $\dot\theta_1$ follow from Newmark's
+relations), matrix: the inertia's derivative $J^\top m\,\tilde J/(\beta\Delta t^2)$, where
+$\tilde J$ carries, per link, $\partial\ddot{\mathbf X}/\partial\theta_{1,j}=h_j\big((1-\beta\Delta t^2\dot\theta_j^2)\mathbf n_j
+-(2\gamma\Delta t\dot\theta_j+\beta\Delta t^2\ddot\theta_j)\mathbf t_j\big)/(\beta\Delta t^2)$ (the acceleration,
+the centripetal term through the rate, the link's own turn; viscous damping likewise), the
+bending and hinge-viscosity Hessians exactly ($(1+\alpha)D^\top\tfrac{B+\gamma\eta/(\beta\Delta t)}{\ell}D$),
+and the diagonal geometric terms $d_i=-h_i\mathbf t_i\cdot(\mathbf P_i+(1+\alpha)(\boldsymbol\lambda-\mathbf S_i))$
+($\mathbf P_i$, $\mathbf S_i$ the tail sums of the nodes' inertial and applied non-bending forces),
+bordered by the end condition. `jaxrod.linalg.chain.chain_solve` solves it in $O(N)$
+without forming the dense mass matrix. Left out (so Newton is exact only without them): the
+contact's, gravity's and air drag's couplings between different links. The predictor
+extrapolates the acceleration linearly from the last two steps; the iteration stops when
+the residual, scaled by the diagonal of the matrix, and the end condition (over $L$) are
+below `newton_tol`, and a step that has not converged after `newton_iters` is rejected
+and retried shorter (`step_underflow` below $10^{-12}T$; `newton_failed` at a fixed `dt`).
 
 **Step size.** The local error of Newmark's displacement,
 $\mathbf e_\theta=\Delta t^2(\beta-\tfrac16)(\ddot\theta_1-\ddot\theta_0)$, is measured where it
@@ -127,6 +133,7 @@ class HHTStep(dfx.AbstractAdaptiveSolver):
     alpha: float = 0.0
     newton_iters: int = 6
     newton_tol: float = 1e-8
+    extrapolate: float = 1.0
     term_structure: ClassVar = dfx.AbstractTerm
     interpolation_cls: ClassVar = dfx.ThirdOrderHermitePolynomialInterpolation
 
@@ -163,9 +170,9 @@ class HHTStep(dfx.AbstractAdaptiveSolver):
         B = scene.strip.bending_stiffness
         w_hinge = (1.0 + al) * (B + gamma * dissipation.viscosity / (beta * h)) / d.ell
         m_nodes = d.node_mass[1:].at[-1].set(0.0)
-        m_hat = m_nodes * (1.0 + (1.0 + al) * gamma * h * dissipation.damping) / c
+        gam_d = dissipation.damping
         # the diagonal of Newton's matrix without its geometric part: scales the residual test
-        m_tail = jnp.cumsum(m_hat[::-1])[::-1]
+        m_tail = jnp.cumsum(m_nodes[::-1])[::-1] * (1.0 + (1.0 + al) * gamma * h * gam_d) / c
         jac_diag = d.h**2 * m_tail + w_hinge[:-1] + w_hinge[1:]
 
         def residual(th1, a1, lam1):
@@ -175,11 +182,17 @@ class HHTStep(dfx.AbstractAdaptiveSolver):
             R = inert + (1.0 + al) * Gs - al * G0
             dgeo = -d.h * jnp.sum(tt * (P + (1.0 + al) * (lam1[None, :] - S)), -1)
             small = (jnp.max(jnp.abs(R) / jac_diag) <= self.newton_tol) & (jnp.max(jnp.abs(end)) <= self.newton_tol * L)
-            return (R, end, nn, dgeo), (Gs, p, small)
+            return (R, end, nn, tt, dgeo, om1), (Gs, p, small)
 
         def newton(carry):
-            th1, a1, lam1, (R, end, nn, dgeo), _, i = carry
-            dth, dlam = chain_solve(d.h[:, None] * nn, m_hat, dgeo, w_hinge, -R, -end)
+            th1, a1, lam1, (R, end, nn, tt, dgeo, om1), _, i = carry
+            # d(node acceleration + damping)/d(theta_1j) = h_j (cn_j n_j - ct_j t_j) / c: through the
+            # acceleration (n_j / c), the rate (centripetal -2 gamma h omega_j t_j / c, damping), and
+            # the link's own turn (-a_j t_j - omega_j^2 n_j)
+            cn = 1.0 + (1.0 + al) * gam_d * gamma * h - c * om1**2
+            ct = 2.0 * gamma * h * om1 + c * a1 + (1.0 + al) * gam_d * c * om1
+            u = d.h[:, None] * (cn[:, None] * nn - ct[:, None] * tt)
+            dth, dlam = chain_solve(d.h[:, None] * nn, m_nodes / c, dgeo, w_hinge, -R, -end, u=u)
             th1 = th1 + dth
             a1 = a1 + dth / c
             lam1 = lam1 + dlam / (1.0 + al)
@@ -191,11 +204,11 @@ class HHTStep(dfx.AbstractAdaptiveSolver):
 
         # predictor: the acceleration extrapolated linearly from the last two steps
         slope = jnp.where(jnp.isfinite(h_prev), (a0 - a_prev) / jnp.where(jnp.isfinite(h_prev), h_prev, 1.0), 0.0)
-        a_pred = a0 + h * slope
+        a_pred = a0 + self.extrapolate * h * slope
         th_pred = base_th + c * a_pred
         lin, rest = residual(th_pred, a_pred, lam0)
         init = (th_pred, a_pred, lam0, lin, rest, jnp.zeros((), jnp.int32))
-        th1, a1, lam1, (R, end, nn, _), (G1, p1, ok), iters = eqxi.while_loop(
+        th1, a1, lam1, (R, end, nn, _, _, _), (G1, p1, ok), iters = eqxi.while_loop(
             going, newton, init, max_steps=self.newton_iters, kind="checkpointed")
         om1 = base_om + h * gamma * a1
         ok = ok & jnp.all(jnp.isfinite(th1)) & jnp.all(jnp.isfinite(om1))
@@ -229,11 +242,12 @@ class HHT(eqx.Module):
 
     - `alpha`: numerical dissipation, in $[-\tfrac13, 0]$. Default -0.02: the grid-scale
       bending modes, which a step far beyond their period cannot follow, are damped
-      ($\rho_\infty=0.96$) instead of ringing in the error estimate; 0 is the trapezoidal
-      rule, energy-conserving on the bending waves but best with a given `dt`.
+      ($\rho_\infty=0.96$) instead of ringing in the error estimate (at 0, the trapezoidal
+      rule, they keep the adaptive step small, and its energy can grow on the rotating
+      chain: the module docstring).
     - `tol`: the local error allowed per step, as the nodes' position error over $L$
-      (default 3e-6: $v_s$ within about 1e-3 on the brink snap,
-      benchmarks/results/implicit.md).
+      (default 3e-6; on the brink snap of Psi0 = 30 deg, G/L = 0.5 its $v_s$ error is 2e-4,
+      1e-3 and 3e-3 at N = 50, 100 and 200, growing with N: benchmarks/results/implicit.md).
     - `newton_iters`: Newton iterations per step (default 8); a step that has not converged
       after them is retried shorter.
     - `newton_tol`: Newton's stop: the residual scaled by the diagonal of its matrix and the
@@ -245,6 +259,7 @@ class HHT(eqx.Module):
     tol: float = 3e-6
     newton_iters: int = 8
     newton_tol: float = 1e-8
+    extrapolate: float = 1.0
     dt0: float = 1e-4
 
     def __check_init__(self):
@@ -261,8 +276,9 @@ class HHT(eqx.Module):
         return HHTStep(alpha=self.alpha, newton_iters=self.newton_iters, newton_tol=self.newton_tol)
 
     def controller(self, dtmin):
-        """diffrax's PID controller on the nodes' position error (max norm, error order 3)."""
+        """diffrax's PID controller on the nodes' position error (max norm, error order 3). A step
+        below `dtmin` ends the run (`step_underflow`) rather than being accepted unconverged."""
         import optimistix as optx
 
         return dfx.PIDController(rtol=0.0, atol=self.tol, pcoeff=0.0, icoeff=1.0, norm=optx.max_norm,
-                                 dtmin=dtmin)
+                                 dtmin=dtmin, force_dtmin=False)

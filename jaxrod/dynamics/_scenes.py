@@ -186,13 +186,80 @@ def ramp(scene, direction="up", *, rate=0.5, alpha_start=None, right_only=False,
                  bending_energy(eq), eq.result == RESULTS.successful)
 
 
+class Brink(eqx.Module):
+    """The brink scene of [`jaxrod.snap_dynamics`][] (see [`jaxrod.brink`][]): `nudge` along the
+    unstable mode, clamps held `past` rad beyond the critical angle, `route` "first" or
+    "second"."""
+
+    nudge: float = NUDGE
+    past: float = 1e-3
+    route: str = "first"
+
+
+class Ramp(eqx.Module):
+    """The ramp scene of [`jaxrod.snap_dynamics`][] (see [`jaxrod.ramp`][]): both clamps turn at
+    `rate` rad/T from `alpha_start` (default 2 deg before the snap), `seed` the mirror-breaking
+    amplitude."""
+
+    rate: float = 0.5
+    alpha_start: float | None = None
+    seed: float = 0.0
+
+
+class Asymmetric(eqx.Module):
+    """The asymmetric scene of [`jaxrod.snap_dynamics`][]: only the right clamp turns, at `rate`
+    rad/T from `alpha_start` (default 0), the run going on past the snap."""
+
+    rate: float = 0.5
+    alpha_start: float | None = None
+    seed: float = 0.0
+
+
+_KIND_DEFAULTS = dict(nudge=NUDGE, past=1e-3, rate=0.5, alpha_start=None, seed=0.0, route="first")
+
+
+def _kind_settings(kind, given):
+    """`snap_dynamics`' scene kind as `(name, settings)` from a `Brink` / `Ramp` / `Asymmetric` or
+    a string with the keywords `given`; a keyword that contradicts the object raises."""
+    if isinstance(kind, (Brink, Ramp, Asymmetric)):
+        fields = {f: getattr(kind, f) for f in kind.__dataclass_fields__}
+        for name, value in given.items():
+            if name in _KIND_DEFAULTS and _differs(value, _KIND_DEFAULTS[name]):
+                if name not in fields:
+                    raise ValueError(f"{name}: does not apply to {type(kind).__name__}")
+                if _differs(value, fields[name]):
+                    raise ValueError(f"{name}: given both as {type(kind).__name__}({name}={fields[name]!r}) "
+                                     f"and as {name}={value!r}")
+        name = {Brink: "brink", Ramp: "ramp", Asymmetric: "asymmetric"}[type(kind)]
+        return name, {**given, **fields}
+    if kind not in ("brink", "ramp", "asymmetric"):
+        raise ValueError(f"kind must be jaxrod.Brink(...), jaxrod.Ramp(...), jaxrod.Asymmetric(...) or "
+                         f"'brink', 'ramp', 'asymmetric', got {kind!r}")
+    return kind, given
+
+
+def _differs(a, b):
+    if a is None or b is None or isinstance(a, str) or isinstance(b, str):
+        return a is not b and a != b
+    try:
+        return float(a) != float(b)
+    except (TypeError, ValueError):
+        return True
+
+
 def snap_dynamics(scene, direction="up", *, kind="brink", nudge=NUDGE, past=1e-3, rate=0.5,
                   alpha_start=None, snap=None, seed=0.0, route="first", **simulate_kwargs):
-    """One dynamic snap: build the `kind` scene ("brink", "ramp" or "asymmetric", see the
-    module docstring; `seed` for the ramps, `route` for the brink) and integrate it with
-    [`jaxrod.simulate`][]. Returns (start, trajectory)."""
+    """One dynamic snap: build the `kind` scene (a [`jaxrod.Brink`][], [`jaxrod.Ramp`][] or
+    [`jaxrod.Asymmetric`][] with its settings, or the strings "brink", "ramp", "asymmetric" with
+    the keywords: `seed` for the ramps, `route` for the brink; see the module docstring) and
+    integrate it with [`jaxrod.simulate`][] (its keywords, e.g. `solver=jaxrod.HHT()`).
+    Returns (start, trajectory)."""
     from ._simulate import simulate
 
+    kind, ks = _kind_settings(kind, dict(nudge=nudge, past=past, rate=rate, alpha_start=alpha_start,
+                                         seed=seed, route=route))
+    nudge, past, rate, alpha_start, seed, route = (ks[k] for k in ("nudge", "past", "rate", "alpha_start",
+                                                                  "seed", "route"))
     # every setting before any statics are solved (the start state costs a snap_angles)
     if kind not in ("brink", "ramp", "asymmetric"):
         raise ValueError(f"kind must be 'brink', 'ramp' or 'asymmetric', got {kind!r}")

@@ -9,16 +9,19 @@ $$\Phi(y)=\tfrac12\sum_{k=1}^{N}m_k|\mathbf X_k|^2+\tfrac12\sum_{i=1}^Nd_iy_i^2
 
 ($y_0=y_{N+1}=0$: the clamps), i.e. the bordered system
 $(J^\top mJ+\mathrm{diag}\,d+D^\top wD)\,y+V^\top\boldsymbol\lambda=r$, $Vy=\mathbf c$, whose
-matrix $J^\top mJ$ (the chain's mass matrix) is dense. It is solved exactly, without forming
-it, as a discrete optimal-control problem along the chain: state $z_i=(y_i,\mathbf X_i,
-\boldsymbol\lambda)\in\mathbb R^5$, control $y_{i+1}$, transition $\mathbf X_{i+1}=\mathbf X_i+\mathbf v_{i+1}y_{i+1}$.
-A backward sweep from the tip carries the quadratic cost-to-go $\tfrac12z^\top P_iz+q_i^\top z$
-and eliminates one scalar $y_{i+1}$ per link (a division, no matrix inverse); at the base
-($y_0=0$, $\mathbf X_0=0$) a 2x2 solve gives $\boldsymbol\lambda$, and a forward sweep gives $y$.
-Both sweeps are `lax.scan`s of scalar arithmetic: $O(N)$ work, vectorized over a batch.
-The elimination pivots are the Schur complements of the chain; they are positive where the
+matrix $J^\top mJ$ (the chain's mass matrix) is dense. With the inertia's dependence on the
+rates kept (Newton's matrix of the implicit step), the mass term becomes $J^\top m\tilde J$, whose
+$\tilde J$ moves the nodes with other vectors $\mathbf u_j$: no longer symmetric.
+
+Both are solved exactly, without forming the dense matrix, by Gaussian elimination along
+the chain (`chain_solve`): a backward sweep from the tip expresses each link's $y_i$ and the
+tail sum of the inertial terms as affine functions of the state before it (the elimination
+pivot is one scalar per link: a division, no matrix inverse), a forward sweep carries the
+solution as an affine function of $\boldsymbol\lambda$, and the end condition gives
+$\boldsymbol\lambda$ (2x2). Both sweeps are `lax.scan`s over small arrays: $O(N)$ work,
+vectorized over a batch. The pivots are Schur complements of the chain, positive where the
 matrix is positive definite on the constraint's null space (the implicit step's case, whose
-mass term $m_k\propto 1/\Delta t^2$ dominates).
+mass term $m_k\propto1/\Delta t^2$ dominates).
 """
 
 from __future__ import annotations
@@ -27,58 +30,67 @@ import jax.numpy as jnp
 from jax import lax
 
 
-def chain_solve(v, m, d, w, r, c):
-    r"""Solve the bordered chain system of the module docstring.
+def chain_solve(v, m, d, w, r, c, u=None):
+    r"""Solve the chain system of the module docstring, or, with `u`, the one whose mass term is
+    not symmetric:
+    $v_i\cdot\big(\sum_{k\ge i}m_k\tilde{\mathbf X}_k+\boldsymbol\lambda\big)+d_iy_i+(D^\top wDy)_i=r_i$,
+    $\sum_iv_iy_i=\mathbf c$, with $\tilde{\mathbf X}_k=\sum_{j\le k}\mathbf u_jy_j$ (`u` (N, 2), default
+    `v`: the symmetric system). Newton's matrix of the implicit step has this form once the
+    inertia's dependence on the rates (its Coriolis and centripetal terms) is kept.
+
+    Gaussian elimination along the chain, from the tip: the row of link $i$ gives $y_i$ as an
+    affine function of the state $z_{i-1}=(y_{i-1},\tilde{\mathbf X}_{i-1},\boldsymbol\lambda)$ and the
+    tail sum $\Pi_i=\sum_{k\ge i}m_k\tilde{\mathbf X}_k+\boldsymbol\lambda$ as another (both carried as
+    one (3, 6) array: $[B\,|\,\mathbf b]$ for $\Pi$, $[\alpha\,|\,a]$ for the next $y$). A forward sweep
+    then carries $y$, $\tilde{\mathbf X}$ and $\mathbf X=\sum v_jy_j$ as affine functions of
+    $\boldsymbol\lambda$ (three columns), and the end condition $\mathbf X_N=\mathbf c$ gives
+    $\boldsymbol\lambda$ (2x2, Cramer).
 
     **Arguments:** `v` (N, 2) the node-motion vectors $\mathbf v_i=h_i\mathbf n_i$; `m` (N,)
     the node weights $m_1..m_N$; `d` (N,) the diagonal; `w` (N+1,) the hinge weights
-    $w_0..w_N$; `r` (N,) the right-hand side; `c` (2,) the prescribed tip displacement.
+    $w_0..w_N$; `r` (N,) the right-hand side; `c` (2,) the prescribed tip displacement;
+    `u` (N, 2) the vectors the mass term moves with (default `v`).
 
     **Returns:** `(y, lam)`, shapes (N,) and (2,).
-
-    State index 0 is $y_i$, 1-2 are $\mathbf X_i$, 3-4 are $\boldsymbol\lambda$; the backward sweep
-    carries $[P_i\,|\,q_i]$ as one (5, 6) array and records, per link, the elimination's
-    $(\mathbf b,\beta,a)$ with $y_{i+1}=-(\mathbf b\cdot z_i+\beta)/a$.
     """
-    n = r.shape[0]; dt = r.dtype
-    # state columns 0..4 = P, column 5 = q ; P symmetric
-    e0 = jnp.zeros(5, dt).at[0].set(1.0)
-    keep = jnp.array([0., 1., 1., 1., 1.], dt)
-    K2 = keep[:, None] * keep[None, :]
-    E00 = jnp.zeros((5, 5), dt).at[0, 0].set(1.0)
-    IX = jnp.diag(jnp.array([0., 1., 1., 0., 0.], dt))
-    P = jnp.diag(jnp.stack([w[n], m[n-1], m[n-1], jnp.zeros((), dt), jnp.zeros((), dt)]))
-    P = P.at[1, 3].set(1.0).at[3, 1].set(1.0).at[2, 4].set(1.0).at[4, 2].set(1.0)
-    q = jnp.zeros(5, dt).at[3].set(-c[0]).at[4].set(-c[1])
-    Pq = jnp.concatenate([P, q[:, None]], 1)  # (5, 6)
-    m_base = jnp.concatenate([jnp.zeros(1, dt), m[:-1]])
-    ones = jnp.ones(n, dt); zeros = jnp.zeros(n, dt)
-    E = jnp.stack([ones, v[:, 0], v[:, 1], zeros, zeros], 1)  # (n, 5)
-    sc = jnp.stack([w[:n], d, r, m_base], 1)  # (n, 4)
+    if u is None:
+        u = v
+    n = r.shape[0]
+    dt = r.dtype
+    zeros, ones = jnp.zeros(n, dt), jnp.ones(n, dt)
+    keep6 = jnp.array([0., 1., 1., 1., 1., 1.], dt)
+    K = jnp.zeros((3, 6), dt).at[0, 3].set(1.0).at[1, 4].set(1.0)   # [B | b] ; [al | a]
+    e = jnp.stack([ones, u[:, 0], u[:, 1], zeros, zeros], 1)          # z_i = E z_{i-1} + e y_i
+    # per-row constant part of g6: mi*(0,v0,v1,0,0,0) + (di+wl+wr) e0 - r e5, and -wl on coef[0]
+    g_const = jnp.stack([d + w[:n] + w[1:], m * v[:, 0], m * v[:, 1], zeros, zeros, -r], 1)
+    mxr = jnp.zeros((n, 2, 6), dt).at[:, 0, 1].set(m).at[:, 1, 2].set(m)
+    e0 = jnp.zeros(6, dt).at[0].set(1.0)
+    inp = (v, e, g_const, w[:n], w[1:], mxr)
 
-    def back(Pq, inp):
-        e, s = inp
-        wi, dn, rn, mi = s[0], s[1], s[2], s[3]
-        Pe5 = Pq[:, :5] @ e
-        a = wi + dn + e @ Pe5
-        b = keep * Pe5 - wi * e0
-        beta = e @ Pq[:, 5] - rn
-        bb = jnp.concatenate([b, jnp.stack([beta])])  # (6,)
-        Pn = K2 * Pq[:, :5] + wi * E00 + mi * IX
-        qn = keep * Pq[:, 5]
-        out = jnp.concatenate([Pn, qn[:, None]], 1) - b[:, None] * bb[None, :] / a
-        return out, jnp.concatenate([bb, a[None]])
+    def back(K, x):
+        vi, ei, gc, wli, wri, mxi = x
+        g6 = vi[0] * K[0] + vi[1] * K[1] - wri * K[2] + gc
+        piv = jnp.sum(g6[:5] * ei)
+        row2 = (wli * e0 - keep6 * g6) / piv
+        BB = K[:2] + mxi
+        Be = jnp.sum(BB[:, :5] * ei[None, :], 1)
+        top = BB * keep6[None, :] + Be[:, None] * row2[None, :]
+        return jnp.concatenate([top, row2[None]], 0), row2
 
-    Pq, out = lax.scan(back, Pq, (E, sc), reverse=True, unroll=2)
-    P = Pq[:, :5]; q = Pq[:, 5]
-    p11, p12, p22 = P[3, 3], P[3, 4], P[4, 4]
-    det = p11 * p22 - p12 * p12
-    lam = jnp.stack([-(p22 * q[3] - p12 * q[4]) / det, -(p11 * q[4] - p12 * q[3]) / det])
-    # y_{i+1} = -(b.z + beta)/a with z = (y, X0, X1, lam0, lam1)
-    def fwd(carry, inp):
-        z3, vv = carry, None
-        o, vn = inp
-        y = -(o[0] * carry[0] + o[1] * carry[1] + o[2] * carry[2] + o[3] * lam[0] + o[4] * lam[1] + o[5]) / o[6]
-        return jnp.stack([y, carry[1] + vn[0] * y, carry[2] + vn[1] * y]), y
-    _, y = lax.scan(fwd, jnp.zeros(3, dt), (out, v), unroll=2)
-    return y, lam
+    _, rows = lax.scan(back, K, inp, reverse=True, unroll=2)
+    e7 = jnp.stack([ones, u[:, 0], u[:, 1], zeros, zeros, v[:, 0], v[:, 1]], 1)
+    Z0 = jnp.zeros((7, 3), dt).at[3, 1].set(1.0).at[4, 2].set(1.0)
+    keep7 = jnp.array([0., 1., 1., 1., 1., 1., 1.], dt)[:, None]
+    unit = jnp.array([1., 0., 0.], dt)
+
+    def fwd(Z, x):
+        row2, ei7 = x
+        yn = jnp.sum(row2[:5, None] * Z[:5], 0) + row2[5] * unit
+        return keep7 * Z + ei7[:, None] * yn[None, :], yn
+
+    Z, ys = lax.scan(fwd, Z0, (rows, e7), unroll=2)
+    Xv = Z[5:7]
+    det = Xv[0, 1] * Xv[1, 2] - Xv[0, 2] * Xv[1, 1]
+    rhs = c - Xv[:, 0]
+    lam = jnp.stack([(rhs[0] * Xv[1, 2] - Xv[0, 2] * rhs[1]) / det, (Xv[0, 1] * rhs[1] - rhs[0] * Xv[1, 1]) / det])
+    return ys[:, 0] + ys[:, 1:] @ lam, lam
