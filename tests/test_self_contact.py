@@ -380,3 +380,14 @@ def test_contact_in_physical_units():
     assert float(c.stiffness) == pytest.approx(1e5 * B / L**3, rel=1e-12)
     d = jr.Contact.for_strip(jr.Strip())
     assert float(d.thickness) == pytest.approx(0.01) and float(d.stiffness) == pytest.approx(1e5)
+
+
+def test_trajectory_through_itself_is_flagged():
+    """Psi0 = 180 deg at G/L = 0.1: without contact the snap's saved frames pass through
+    themselves, and the run says so (`self_intersecting`, not `successful`); with the contact
+    model at N = 24 the same snap is a valid motion."""
+    free = jr.make_scene(180, 0.1, n=24)
+    _, tr = jr.snap_dynamics(free, "up")
+    assert tr.result == jr.RESULTS.self_intersecting
+    _, tr = jr.snap_dynamics(jr.make_scene(180, 0.1, n=24, contact=jr.Contact()), "up")
+    assert tr.result == jr.RESULTS.successful and bool(tr.snapped)

@@ -42,7 +42,8 @@ def _add_run_args(p):
                         "jaxrod.dynamics.NUDGE)")
     g.add_argument("--rate", type=float, default=0.5, help="ramp/asymmetric: clamp rate, rad per T (default 0.5)")
     g.add_argument("--solver", default="rattle",
-                   help="rattle (default: fixed step, symplectic), tsit5, dopri5, dopri8, kvaerno3, kvaerno5")
+                   help="rattle (default: fixed step, symplectic), hht (implicit, its step set by accuracy: "
+                        "jaxrod.HHT() at its defaults, --rtol not used), tsit5, dopri5, dopri8, kvaerno3, kvaerno5")
     g.add_argument("--rtol", type=float, default=1e-6,
                    help="adaptive solvers: relative = absolute tolerance (default 1e-6)")
     g.add_argument("--t1", type=float, default=4.0, help="time limit in T (default 4)")
@@ -93,8 +94,8 @@ def _check_run_args(args):
 
     if args.nudge is None:  # the parser leaves it out: the dynamics are imported only where needed
         args.nudge = NUDGE
-    if args.solver not in SOLVERS:
-        raise InputError(f"solver must be one of {sorted(SOLVERS)}, got {args.solver!r}")
+    if args.solver not in SOLVERS and args.solver != "hht":
+        raise InputError(f"solver must be one of {sorted([*SOLVERS, 'hht'])}, got {args.solver!r}")
     for name in ("nudge", "rate", "rtol", "t1"):
         v = getattr(args, name)
         if not (math.isfinite(v) and v > 0):
@@ -117,10 +118,17 @@ def _physical(args):
     return float(st.speed_gauge), float(st.time_unit)
 
 
+def _solver(args):
+    """`--solver` as `jr.simulate` takes it: "hht" is `jaxrod.HHT()`, the rest are its strings."""
+    import jaxrod as jr
+
+    return jr.HHT() if args.solver == "hht" else args.solver
+
+
 def run_snap(scene, args, kind):
     import jaxrod as jr
 
-    kw = dict(solver=args.solver, rtol=args.rtol, atol=args.rtol, t1=args.t1)
+    kw = dict(solver=_solver(args), rtol=args.rtol, atol=args.rtol, t1=args.t1)
     try:
         if kind == "asymmetric":
             start, tr = jr.snap_dynamics(scene, args.direction, kind="asymmetric", rate=args.rate,
@@ -225,7 +233,7 @@ def _cmd_snap(args):
         ta = max(0.0, float(tr.t_peak) - 4.0 * dur)
         tb = float(tr.t_end)
         tr = jr.simulate(start.scene, start.theta0, start.protocol, direction=start.direction, t1=tb,
-                         stop_at_snap=args.scene != "asymmetric", solver=args.solver, rtol=args.rtol, atol=args.rtol,
+                         stop_at_snap=args.scene != "asymmetric", solver=_solver(args), rtol=args.rtol, atol=args.rtol,
                          frame_window=(ta, tb), n_frames=48)
     with writing("plot/animate"):
         if args.plot:
@@ -400,7 +408,7 @@ def _cmd_speed_plane(args):
                    ("successful" if bool(path_.snaps) else "no_snap"))
         if row["snaps"] and row["result"] == "successful":
             start, tr = jr.snap_dynamics(scene, args.direction, kind="brink", nudge=args.nudge, snap=snap,
-                                         solver=args.solver, rtol=args.rtol, atol=args.rtol, t1=args.t1)
+                                         solver=_solver(args), rtol=args.rtol, atol=args.rtol, t1=args.t1)
             if layout:
                 row["v_s_creases"] = ";".join(f"{float(v):.10g}" for v in np.asarray(tr.v_s_creases))
             row.update(alpha_c_deg=float(np.degrees(start.alpha_c)), v_s=float(tr.v_s),

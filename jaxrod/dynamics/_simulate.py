@@ -80,7 +80,10 @@ class Trajectory(eqx.Module):
     damped), `num_steps`, `result` (a [`jaxrod.RESULTS`][] code: `successful` for a run that
     reached `t1` or ended at the snap; `energy_drift`, `constraint_drift`,
     `constraint_solve_failed`, `steps_exhausted`, `integration_failed` or `nonfinite` for a run
-    stopped early, whose samples up to `t_end` are those computed before the stop),
+    stopped early, whose samples up to `t_end` are those computed before the stop;
+    `self_intersecting` for a run that went on but one of whose saved frames passes through
+    itself, two non-neighbouring segments crossing: not a motion of the model, which then
+    needs `jaxrod.Contact`),
     `solver_result` (diffrax's own code)."""
 
     t: jax.Array
@@ -463,6 +466,14 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     drift = jnp.max(jnp.where(fin, jnp.abs(E - E[0]), 0.0)) / jnp.abs(o["potential"][0])
     drift = jnp.where(conservative, drift, jnp.nan)
     kin = jnp.where(jnp.isfinite(o["kinetic"]), o["kinetic"], -jnp.inf)
+    result = _verdict(sol, jnp.all(jnp.where(jnp.isfinite(sol.ts[0]), jnp.isfinite(E), True)), solver == "hht")
+    # a run whose saved frames pass through themselves is not a physical motion of the model
+    from ..energy.contact import self_intersects
+
+    shown = jnp.isfinite(sol.ts[1]) & jnp.all(jnp.isfinite(fr["theta"]), -1)
+    crossed = jax.vmap(lambda th: self_intersects(jnp.where(jnp.isfinite(th), th, 0.0), scene))(fr["theta"])
+    crossed = jnp.any(crossed & shown)
+    result = RESULTS.where((result == RESULTS.successful) & crossed, RESULTS.self_intersecting, result)
     return Trajectory(
         t=ts, fold_height=fh, fold_speed=o["fold_speed"], bending=o["bending"], potential=o["potential"],
         kinetic=o["kinetic"], clamp_work=o["work"], constraint=o["constraint"], t_frames=tf,
@@ -470,6 +481,6 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
         crease_height=o["crease_height"], crease_speed=o["crease_speed"], v_s_creases=v_s_creases,
         t_cross=t_cross, t_end=t_end, snapped=snapped, kinetic_peak=jnp.max(kin), energy_drift=drift,
         num_steps=sol.stats["num_steps"] * substeps,  # RATTLE steps (substeps: 1 otherwise)
-        result=_verdict(sol, jnp.all(jnp.where(jnp.isfinite(sol.ts[0]), jnp.isfinite(E), True)), solver == "hht"),
+        result=result,
         solver_result=sol.result,
     )
