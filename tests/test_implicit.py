@@ -118,15 +118,21 @@ def test_slam_past_the_snap_is_flagged(brink24):
         assert not np.any(np.isfinite(np.asarray(tr.fold_speed)[late]))
 
 
-def test_vs_of_the_snap_not_of_the_run(brink24):
+def test_vs_of_the_snap_not_of_the_run():
     """v_s is the snap's peak (up to its first overshoot) however long the run goes on;
-    v_peak is the whole run's peak."""
+    v_peak is the whole run's peak. Undamped, a ramp past its snap rings faster than the snap
+    itself (measured v_peak 24.0 against v_s 16.95 at N = 24 through t = 3 T); without contact
+    the ringing folds the strip through itself, which the run reports (`self_intersecting`)
+    without changing its numbers."""
+    start = jr.ramp(jr.make_scene(30, 0.5, 0, n=N), "up", rate=0.5)
     solver = jr.Rattle(courant=0.05)  # the same steps and samples on and past the snap
-    stop = _run(brink24, solver=solver, t1=1.2)
-    on = _run(brink24, solver=solver, t1=1.2, stop_at_snap=False)
-    assert on.result == jr.RESULTS.successful and float(on.t_end) == pytest.approx(1.2)
+    stop = _run(start, solver=solver, t1=3.0)
+    on = _run(start, solver=solver, t1=3.0, stop_at_snap=False)
+    assert stop.result == jr.RESULTS.successful and bool(stop.snapped) and float(stop.t_end) < 1.5
+    assert on.result in (jr.RESULTS.successful, jr.RESULTS.self_intersecting)
+    assert float(on.t_end) == pytest.approx(3.0)
     assert abs(float(on.v_s) - float(stop.v_s)) < 1e-6 * float(stop.v_s)
-    assert float(on.v_peak) >= float(on.v_s)
+    assert float(on.v_peak) > 1.2 * float(on.v_s)
     assert float(stop.v_peak) == pytest.approx(float(stop.v_s), rel=1e-12)
 
 
