@@ -89,6 +89,7 @@ def test_brink_snap_after_contact_clicks(with_contact):
         assert not np_crossings(x[np.all(np.isfinite(x), -1)])
 
 
+@pytest.mark.slow  # 26 s on 2 cores (a CLI program of its own): the clicks themselves are in CI (test_brink_snap_after_contact_clicks)
 def test_cli_reports_contact_clicks(with_contact, capsys):
     """`jaxrod snap-angles` with contact prints each path's clicks before its snap (the
     same numbers as the API's `SnapPath.clicks`); without contact it prints none."""

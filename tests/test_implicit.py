@@ -136,6 +136,7 @@ def test_vs_of_the_snap_not_of_the_run():
     assert float(stop.v_peak) == pytest.approx(float(stop.v_s), rel=1e-12)
 
 
+@pytest.mark.slow  # 30 s on 2 cores; the default solver's gradients are in CI (test_dynamics_physics)
 def test_gradient_matches_central_differences():
     """d v_s / d(Psi0, G, s0) through HHT runs (a fixed step, Newton to 1e-12, all differentiated
     by diffrax's checkpointed reverse pass) equals central differences."""

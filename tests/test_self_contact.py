@@ -321,6 +321,7 @@ def test_undamped_run_with_contact_conserves_energy(pressed):
 
 # ------------------------------------------------------------------ the phase diagram (the snap paths, the brink after
 # clicks and the CLI's clicks are in test_contact_paths.py)
+@pytest.mark.slow  # 49 s on 2 cores: contact snap paths at small gaps are in CI through test_contact_paths.py
 def test_phase_diagram_with_contact_to_small_gaps():
     """The phase diagram with contact down to G/L = 0.05: every path successful on a small
     grid where the contact-free one is flagged self_intersecting at the small gaps."""
