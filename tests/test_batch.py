@@ -11,6 +11,9 @@ exhausts its step budget. Each keeps its own code, each equals its single call
 call has NaN), and no member's numbers change with the company it keeps (the good members
 are the same, to 1e-9 deg, in a batch of good members only and in another order).
 
+The batch runs on 3 lanes (`jaxrod._lanes`: fewer lanes than members, so members finish and
+others take their lanes mid-run), as a batch larger than the default lanes would.
+
 Four programs are compiled: the single call and the batch, each with the default settings
 and with the small step budget (~10 s and ~17 s each on 2 cores at XLA -O0); everything else
 reuses them (`batched.lower(scenes).compile()` included)."""
@@ -124,6 +127,20 @@ def assert_same_member(got, want, alpha_tol_deg, where):
 
 
 # ---------------------------------------------------------------------------- fixtures
+
+@pytest.fixture(scope="module", autouse=True)
+def three_lanes():
+    """Every batch of this module on 3 lanes (read when a batch is traced)."""
+    from jaxrod import _lanes
+
+    key = jax.default_backend()
+    saved = [(table, dict(table)) for table in (_lanes.LANES, _lanes.MIN_QUEUE)]
+    _lanes.LANES[key], _lanes.MIN_QUEUE[key] = 3, 0
+    yield
+    for table, old in saved:
+        table.clear()
+        table.update(old)
+
 
 @pytest.fixture(scope="module")
 def batched():

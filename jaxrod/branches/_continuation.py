@@ -36,6 +36,7 @@ from ..energy.geometry import discretize
 from ..energy.contact import self_intersects
 from ..energy.lagrangian import lagrangian_gradient, positions
 from ..statics import float_scene
+from .._lanes import machine_vmap
 from .._misc import check_bool, check_int, check_number, check_sign, is_concrete, jit, run_if
 from ..results import RESULTS
 
@@ -284,90 +285,65 @@ def _check_bounds(name, bounds):
         raise ValueError(f"{name} must be (lo, hi) with lo < hi, got {bounds!r}")
 
 
-@jit
-def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), *, direction: float = 1.0,
-                    bounds=(-jnp.pi, jnp.pi), settings: Continuation = Continuation(),
-                    stop_on_instability: bool = False, check_contact: bool = True) -> Branch:
-    r"""Follow the branch of equilibria through `eq` as `parameter` varies.
-
-    **Arguments:**
-    - `scene`, `eq`: the scene and an equilibrium of it (the start point).
-    - `parameter`: a [`jaxrod.SymmetricAlpha`][] (default), `LeftAlpha`, `RightAlpha`
-      or `Gap`.
-    - `direction`: +1 to start toward increasing parameter, -1 toward decreasing.
-    - `bounds`: stop once the parameter leaves this interval.
-    - `stop_on_instability`: stop at the first point whose unstable count differs from
-      the start's (a snap candidate).
-    - `check_contact`: check every point for self-intersection (`Branch.crossing`; one
-      O(N^2) pass per point after the continuation; with self-contact only the start's,
-      since every later point was checked before it was accepted, see below).
-
-    With self-contact (`scene.contact`) a corrected point that passes through itself is
-    rejected like a corrector that fails (the step is halved): a step cannot carry the
-    strip through itself.
-
-    **Returns:** a [`jaxrod.Branch`][].
-    """
-    check_sign("direction", direction)
-    _check_bounds("bounds", bounds)
-    if not isinstance(settings, Continuation):
-        raise ValueError(f"settings must be a jaxrod.Continuation, got {settings!r}")
-    check_bool("stop_on_instability", stop_on_instability)
-    check_bool("check_contact", check_contact)
-    scene = lax.stop_gradient(float_scene(scene))
-    dtype = eq.theta.dtype
-    require_float64(dtype, "continue_branch")
-    tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
-    F, F_lam, Kf = _pieces(scene, parameter)
-    disc = _discretization(scene, parameter)
-    d = discretize(scene)
-    w = d.h
+def _continuation_machine(static, parameter, settings, tol, stop_on_instability):
+    r"""`continue_branch`'s loop as a machine (`jaxrod._lanes`): inputs `(arrays, theta0,
+    force0, lo, hi)`, the scene's arrays (`static` its other leaves), the start state and the
+    bounds; result `(buffers, count, stop)`. One pass of the loop is one corrector iteration
+    (the residual at the iterate, and where it is above tolerance the Newton step on the
+    bordered system of the module docstring); the pass whose iteration decides the step
+    (converged, or given up after `steps` iterations or at a non-finite iterate) also records
+    the point, takes the new tangent and unstable count from the same bordered solve (two
+    more columns of it) and predicts the next point. A batch runs on lanes: each member goes
+    from step to step on its own, and the batch costs its members' corrector iterations, not
+    its slowest member's."""
     M = settings.max_points
-    N = eq.theta.shape[0]
-    lam0 = jnp.asarray(parameter.get(scene), dtype)
-    t0, m0 = lax.stop_gradient(eq.theta), lax.stop_gradient(eq.force)
-    K0 = Kf(t0, m0, lam0)
-    # initial tangent: K z = -F_lam, tau = (z, 1) * direction, normalized
-    zt, zm = kkt.solve(K0, -F_lam(t0, m0, lam0)[0], -F_lam(t0, m0, lam0)[1])
-    nrm = jnp.sqrt(jnp.sum(w * zt**2) + 1.0)
-    tau0 = (direction * zt / nrm, direction * zm / nrm, direction * jnp.ones((), dtype) / nrm)
-    nu0 = kkt.count_below(K0, jnp.zeros(1, dtype))[0]
-    lo, hi = bounds
 
-    def fh(t, m, lam):
-        sc = parameter.set(scene, lam)
-        return positions(t, m, sc, disc(sc))[N // 2, 1]
+    def unpack(x):
+        arrays, t0, m0, lo, hi, _ = x
+        scene = eqx.combine(arrays, static)
+        F, F_lam, Kf = _pieces(scene, parameter)
+        disc = _discretization(scene, parameter)
+        w = discretize(scene).h
+        N = t0.shape[0]
 
-    buf = dict(
-        lam=jnp.full((M,), jnp.nan, dtype).at[0].set(lam0),
-        theta=jnp.full((M, N), jnp.nan, dtype).at[0].set(t0),
-        force=jnp.full((M, 2), jnp.nan, dtype).at[0].set(m0),
-        tau_lam=jnp.full((M,), jnp.nan, dtype).at[0].set(tau0[2]),
-        num_unstable=jnp.full((M,), -1, jnp.int32).at[0].set(nu0),
-        fold_height=jnp.full((M,), jnp.nan, dtype).at[0].set(fh(t0, m0, lam0)),
-        ds=jnp.zeros((M,), dtype),
-    )
-    steps = settings.steps_for(scene)
-    ds0 = jnp.asarray(settings.ds, dtype)
+        def fh(t, m, lam):
+            sc = parameter.set(scene, lam)
+            return positions(t, m, sc, disc(sc))[N // 2, 1]
+
+        return scene, F, F_lam, Kf, w, fh, lo, hi
 
     def predicted(t, m, lam, tau, ds):
         return t + ds * tau[0], m + ds * tau[1], lam + ds * tau[2]
 
-    # One pass of the loop is one corrector iteration (the residual at the iterate, and where
-    # it is above tolerance the Newton step on the bordered system of the module docstring); the
-    # pass whose iteration decides the step (converged, or given up after `steps` iterations
-    # or at a non-finite iterate) also records the point, takes the new tangent and unstable
-    # count from the same bordered solve (two more columns of it) and predicts the next
-    # point. Under `vmap` each member thus goes from step to step on its own, and a batch
-    # costs the most corrector iterations any member needs in all, not, step by step, the
-    # most any member needs for that step.
-    init = dict(buf=buf, i=jnp.ones((), jnp.int32), t=t0, m=m0, lam=lam0, tau=tau0, ds=ds0,
-                stop=jnp.full((), -1, jnp.int32), x=predicted(t0, m0, lam0, tau0, ds0), k=jnp.zeros((), jnp.int32))
+    def init(x):
+        _, t0, m0, _, _, direction = x
+        scene, F, F_lam, Kf, w, fh, lo, hi = unpack(x)
+        dtype, N = t0.dtype, t0.shape[0]
+        lam0 = jnp.asarray(parameter.get(scene), dtype)
+        K0 = Kf(t0, m0, lam0)
+        # initial tangent: K z = -F_lam, tau = (z, 1) * direction, normalized
+        zt, zm = kkt.solve(K0, -F_lam(t0, m0, lam0)[0], -F_lam(t0, m0, lam0)[1])
+        nrm = jnp.sqrt(jnp.sum(w * zt**2) + 1.0)
+        tau0 = (direction * zt / nrm, direction * zm / nrm, direction * jnp.ones((), dtype) / nrm)
+        nu0 = kkt.count_below(K0, jnp.zeros(1, dtype))[0]
+        buf = dict(
+            lam=jnp.full((M,), jnp.nan, dtype).at[0].set(lam0),
+            theta=jnp.full((M, N), jnp.nan, dtype).at[0].set(t0),
+            force=jnp.full((M, 2), jnp.nan, dtype).at[0].set(m0),
+            tau_lam=jnp.full((M,), jnp.nan, dtype).at[0].set(tau0[2]),
+            num_unstable=jnp.full((M,), -1, jnp.int32).at[0].set(nu0),
+            fold_height=jnp.full((M,), jnp.nan, dtype).at[0].set(fh(t0, m0, lam0)),
+            ds=jnp.zeros((M,), dtype),
+        )
+        ds0 = jnp.asarray(settings.ds, dtype)
+        return dict(buf=buf, i=jnp.ones((), jnp.int32), t=t0, m=m0, lam=lam0, tau=tau0, ds=ds0,
+                    stop=jnp.full((), -1, jnp.int32), x=predicted(t0, m0, lam0, tau0, ds0),
+                    k=jnp.zeros((), jnp.int32), nu0=nu0)
 
-    def cond(c):
-        return (c["stop"] < 0) & (c["i"] < M)
-
-    def body(c):
+    def step(x, c):
+        scene, F, F_lam, Kf, w, fh, lo, hi = unpack(x)
+        steps = settings.steps_for(scene)
+        nu0 = c["nu0"]
         t, m, lam, tau, ds = c["t"], c["m"], c["lam"], c["tau"], c["ds"]
         tp, mp, lp = predicted(t, m, lam, tau, ds)
         cw = w * tau[0]
@@ -414,10 +390,59 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
         nxt = predicted(t, m, lam, tau, ds_new)
         x = jax.tree.map(lambda p_, x_: jnp.where(decided, p_, x_), nxt, (tn, mn, ln))
         return dict(buf=buf, i=i_new, t=t, m=m, lam=lam, tau=tau, ds=ds_new, stop=stop, x=x,
-                    k=jnp.where(decided, 0, k))
+                    k=jnp.where(decided, 0, k), nu0=nu0)
 
-    out = lax.while_loop(cond, body, init)
-    b = out["buf"]
+
+    def done(x, c):
+        return (c["stop"] >= 0) | (c["i"] >= M)
+
+    def finish(x, c):
+        return c["buf"], c["i"], c["stop"]
+
+    return machine_vmap(init, step, done, finish)
+
+
+@jit
+def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), *, direction: float = 1.0,
+                    bounds=(-jnp.pi, jnp.pi), settings: Continuation = Continuation(),
+                    stop_on_instability: bool = False, check_contact: bool = True) -> Branch:
+    r"""Follow the branch of equilibria through `eq` as `parameter` varies.
+
+    **Arguments:**
+    - `scene`, `eq`: the scene and an equilibrium of it (the start point).
+    - `parameter`: a [`jaxrod.SymmetricAlpha`][] (default), `LeftAlpha`, `RightAlpha`
+      or `Gap`.
+    - `direction`: +1 to start toward increasing parameter, -1 toward decreasing.
+    - `bounds`: stop once the parameter leaves this interval.
+    - `stop_on_instability`: stop at the first point whose unstable count differs from
+      the start's (a snap candidate).
+    - `check_contact`: check every point for self-intersection (`Branch.crossing`; one
+      O(N^2) pass per point after the continuation; with self-contact only the start's,
+      since every later point was checked before it was accepted, see below).
+
+    With self-contact (`scene.contact`) a corrected point that passes through itself is
+    rejected like a corrector that fails (the step is halved): a step cannot carry the
+    strip through itself.
+
+    **Returns:** a [`jaxrod.Branch`][].
+    """
+    check_sign("direction", direction)
+    _check_bounds("bounds", bounds)
+    if not isinstance(settings, Continuation):
+        raise ValueError(f"settings must be a jaxrod.Continuation, got {settings!r}")
+    check_bool("stop_on_instability", stop_on_instability)
+    check_bool("check_contact", check_contact)
+    scene = lax.stop_gradient(float_scene(scene))
+    dtype = eq.theta.dtype
+    require_float64(dtype, "continue_branch")
+    tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
+    lo, hi = bounds
+    arrays, static = eqx.partition(scene, eqx.is_array)
+    x = (arrays, lax.stop_gradient(eq.theta), lax.stop_gradient(eq.force), jnp.asarray(lo, dtype), jnp.asarray(hi, dtype),
+         jnp.asarray(direction, dtype))
+    b, count, stop = _continuation_machine(static, parameter, settings, tol, stop_on_instability)(x)
+    out = dict(buf=b, i=count, stop=stop)
+    M = settings.max_points
     crossing = None
     if check_contact and scene.contact is not None:
         # every later point was checked before it was accepted: only the start is left

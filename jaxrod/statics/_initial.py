@@ -37,12 +37,14 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax
+import numpy as np
 import jax.numpy as jnp
 from jax import lax
 
 from ..energy.geometry import discretize, scene_dtype
 from ..energy.lagrangian import positions
 from ._equilibrium import Newton, _implicit, float_scene, newton_iteration, newton_start, solve_unflagged, flag_contact
+from .._lanes import machine_vmap
 from .._misc import check_int, jit
 from ..results import RESULTS
 from ._solution import Equilibrium
@@ -171,34 +173,72 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2), warm=None):
 
     Returns `(eq, found, warmed)`: the polished equilibrium (scene `target`), whether a path
     (or the warm start) was valid, and whether the warm start was."""
-    dtype = scene_dtype(target)
-    kinds = jnp.asarray(kinds, jnp.int32)
-    zero = jnp.zeros((), dtype)
-    flat = _deformed(_with_gap(target, zero), zero, zero)
-    guess = sgn * buckled_guess(flat, True)
-    seed = 0.0 if target.contact is None else CONTACT_SEED
+    kinds = tuple(int(k) for k in kinds)
+    arrays, static = eqx.partition(target, eqx.is_array)
+    x = (arrays, jnp.asarray(sgn, scene_dtype(target)), warm)
+    eq_static = eqx.filter(jax.eval_shape(lambda: solve_unflagged(target, jnp.zeros(target.mesh.n, scene_dtype(target)),
+                                                                  None, solver)),
+                           lambda v: isinstance(v, jax.ShapeDtypeStruct), inverse=True)
+    out, found, warmed = _homotopy_machine(static, steps, solver, kinds, warm is not None)(x)
+    return eqx.combine(out, eq_static), found, warmed
+
+
+def _homotopy_machine(static, steps, solver, kinds, has_warm):
+    """`_homotopy`'s loop as a machine (`jaxrod._lanes`): inputs `(arrays, sgn, warm)`, the
+    target scene's arrays (`static` its other leaves), the side and the warm start or None.
+    A batch of them runs on lanes: each member's solves as alone, the batch costing the
+    members' passes, not its slowest member's for each."""
+    kinds_a = np.asarray(kinds, np.int32)
+
+    def unpack(x):
+        arrays, sgn, warm = x
+        target = eqx.combine(arrays, static)
+        dtype = scene_dtype(target)
+        zero = jnp.zeros((), dtype)
+        flat = _deformed(_with_gap(target, zero), zero, zero)
+        return target, arrays, sgn, warm, dtype, flat
+
+    seed_for = lambda target: 0.0 if target.contact is None else CONTACT_SEED  # noqa: E731
     # the secant prediction (module docstring); not with self-contact, where a predicted state
     # could already pass through itself, which no penalty undoes
-    secant = 1.0 if target.contact is None else 0.0
-    arrays, static = eqx.partition(target, eqx.is_array)
+    secant_for = lambda target: 1.0 if target.contact is None else 0.0  # noqa: E731
 
-    def scene_at(phase, kind, step):
+    def scene_at(target, arrays, dtype, phase, kind, step):
         u = jnp.where(phase == _FLAT, 0.0, (step + 1).astype(dtype) / steps)
         uc, ua = _path_params(kind, u)
         deformed = eqx.filter(_deformed(_with_gap(target, u), uc, ua), eqx.is_array)
         return eqx.combine(_tree_where((phase == _FINAL) | (phase == _WARM), arrays, deformed), static)
 
-    def start_of(phase, t, m, dt, dm):
+    def start_of(target, guess, phase, t, m, dt, dm):
         # where the solve of a phase starts: a path step from the secant prediction (the last
         # step's change added again)
-        t_in = jnp.where(phase == _FLAT, guess, jnp.where(phase == _PATH, t + secant * dt + seed, t))
-        m_in = jnp.where(phase == _FLAT, jnp.zeros_like(m), jnp.where(phase == _PATH, m + secant * dm, m))
+        t_in = jnp.where(phase == _FLAT, guess,
+                         jnp.where(phase == _PATH, t + secant_for(target) * dt + seed_for(target), t))
+        m_in = jnp.where(phase == _FLAT, jnp.zeros_like(m), jnp.where(phase == _PATH, m + secant_for(target) * dm, m))
         return newton_start(t_in, m_in)
 
-    def body(c):
-        c, nw = c[:13], c[13]
+    def init(x):
+        target, arrays, sgn, warm, dtype, flat = unpack(x)
+        guess = sgn * buckled_guess(flat, True)
+        shapes = eqx.filter(jax.eval_shape(lambda: solve_unflagged(target, guess, None, solver)),
+                            lambda v: isinstance(v, jax.ShapeDtypeStruct))
+        out0 = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+        i0 = jnp.zeros((), jnp.int32)
+        f0 = jnp.zeros((), bool)
+        t_init, m_init, phase0 = guess, jnp.zeros(2, dtype), i0 + _FLAT
+        if has_warm:
+            t_w, m_w, ok_w = warm
+            t_init, m_init = jnp.where(ok_w, t_w, t_init), jnp.where(ok_w, m_w, m_init)
+            phase0 = jnp.where(ok_w, _WARM, _FLAT).astype(jnp.int32)
+        c0 = (phase0, i0, i0, t_init, m_init, f0, f0, guess, jnp.zeros(2, dtype), f0, jnp.zeros_like(t_init),
+              jnp.zeros_like(m_init), out0)
+        return c0 + (start_of(target, guess, phase0, t_init, m_init, c0[10], c0[11]), guess)
+
+    def step(x, c):
+        target, arrays, sgn, warm, dtype, flat = unpack(x)
+        c, nw, guess = c[:13], c[13], c[14]
         phase, k, step, t, m, ok, found, t0, m0, ok0, dt, dm, out = c
-        sc = scene_at(phase, kinds[jnp.minimum(k, kinds.shape[0] - 1)], step)
+        sc = scene_at(target, arrays, dtype, phase, jnp.asarray(kinds_a)[jnp.minimum(k, len(kinds) - 1)], step)
         nw, nneg = newton_iteration(sc, solver, nw, count=True)
         # the solve as `solve_unflagged` reports it (a converged iterate is kept, so `nneg`,
         # counted at the iterate, is its unstable count)
@@ -214,9 +254,9 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2), warm=None):
         # secant prediction -> the same step again from the last state; lost from there -> the
         # next path from the flat start, or the polish if none is left
         tracked = ok & still_tracked(eq, sgn, t, sc)
-        retry = ~tracked & ok & jnp.any(secant * dt != 0)
+        retry = ~tracked & ok & jnp.any(secant_for(target) * dt != 0)
         last = step + 1 == steps
-        more = k + 1 < kinds.shape[0]
+        more = k + 1 < len(kinds)
         lost = ~tracked & ~retry & more
         after_path = (jnp.where(tracked, jnp.where(last, _FINAL, _PATH),
                                 jnp.where(retry | more, _PATH, _FINAL)),
@@ -227,7 +267,7 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2), warm=None):
                       tracked & last, t0, m0, ok0,
                       jnp.where(tracked, eq.theta - t, no_dt), jnp.where(tracked, eq.force - m, no_dm))
         head = _tree_where(phase == _FLAT, after_flat, after_path)
-        if warm is not None:
+        if has_warm:
             from ..energy.contact import self_intersects
 
             # the warm start (from the carried state): kept, or the flat start next
@@ -242,25 +282,18 @@ def _homotopy(target, sgn, steps, solver, kinds=(0, 1, 2), warm=None):
         # a solve that has not ended goes on in the next pass; one that has ended hands over
         # to the next phase, whose solve starts at once
         new = _tree_where(nw["done"], decided, c)
-        nw = _tree_where(nw["done"], start_of(new[0], new[3], new[4], new[10], new[11]), nw)
-        # finished members of a batch (under `vmap`) keep their state
-        return _tree_where(phase == _DONE, c + (nw,), new + (nw,))
+        nw = _tree_where(nw["done"], start_of(target, guess, new[0], new[3], new[4], new[10], new[11]), nw)
+        # finished members keep their state
+        return _tree_where(phase == _DONE, c + (nw, guess), new + (nw, guess))
 
-    shapes, eq_static = eqx.partition(jax.eval_shape(lambda: solve_unflagged(target, guess, None, solver)),
-                                      lambda x: isinstance(x, jax.ShapeDtypeStruct))
-    out0 = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
-    i0 = jnp.zeros((), jnp.int32)
-    f0 = jnp.zeros((), bool)
-    t_init, m_init, phase0 = guess, jnp.zeros(2, dtype), i0 + _FLAT
-    if warm is not None:
-        t_w, m_w, ok_w = warm
-        t_init, m_init = jnp.where(ok_w, t_w, t_init), jnp.where(ok_w, m_w, m_init)
-        phase0 = jnp.where(ok_w, _WARM, _FLAT).astype(jnp.int32)
-    c0 = (phase0, i0, i0, t_init, m_init, f0, f0, guess, jnp.zeros(2, dtype), f0, jnp.zeros_like(t_init),
-          jnp.zeros_like(m_init), out0)
-    c = lax.while_loop(lambda c: c[0] != _DONE, body, c0 + (start_of(phase0, t_init, m_init, c0[10], c0[11]),))
-    # a kept warm start ends with `found` and not `ok`; a valid path ends with both
-    return eqx.combine(c[12], eq_static), c[6], c[6] & ~c[5]
+    def done(x, c):
+        return c[0] == _DONE
+
+    def finish(x, c):
+        # a kept warm start ends with `found` and not `ok`; a valid path ends with both
+        return c[12], c[6], c[6] & ~c[5]
+
+    return machine_vmap(init, step, done, finish)
 
 
 def _finite(tree):
