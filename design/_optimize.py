@@ -384,7 +384,10 @@ def optimize(terms, param: Parametrization | None = None, z0=None, *, n: int = 4
         raise ValueError(f"z0: expected shape (B, {param.size}), got {tuple(z0.shape)}")
     if not bool(jnp.all(jnp.isfinite(z0))):
         raise ValueError("z0: starts must be finite")
-    opt = None if optimizer == "lm" else optimizer
+    if not (isinstance(optimizer, str) and optimizer == "lm") and not (
+            callable(getattr(optimizer, "init", None)) and callable(getattr(optimizer, "update", None))):
+        raise ValueError(f"optimizer must be 'lm' or an optax.GradientTransformation, got {optimizer!r}")
+    opt = None if isinstance(optimizer, str) else optimizer
     problem = Problem(terms, param, n)
     t0 = time.perf_counter()
     if isinstance(batch_size, str) and batch_size == "auto":

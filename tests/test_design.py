@@ -60,6 +60,9 @@ def test_bad_terms_and_optimizer_inputs():
         ds.optimize((ds.FoldHeight(-0.2),), ds.Parametrization(free=("gap",)), jnp.zeros((2, 3)), n=16)
     with pytest.raises(ValueError, match="terms"):
         ds.optimize((), ds.Parametrization(free=("gap",)), n=16)
+    for bad in ("foo", "adam", None, 3):
+        with pytest.raises(ValueError, match="optimizer"):
+            ds.optimize((ds.FoldHeight(-0.2),), ds.Parametrization(free=("gap",)), n=16, optimizer=bad)
 
 
 def test_snap_speed_term_with_and_without_dynamics(monkeypatch):

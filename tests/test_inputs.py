@@ -42,10 +42,34 @@ def test_psi0_bounds_are_inclusive_at_flat():
     jr.make_scene(1e-3, 0.5)  # a very tight fold is still a fold
 
 
-@pytest.mark.parametrize("s0", [0.0, -0.02, NAN])
+@pytest.mark.parametrize("s0", [0.0, -0.02, NAN, 0.26, 0.6])
 def test_s0(s0):
+    """Fold widths in (0, 0.25 L]: wider, the crease's profile is cut off by the strip's ends
+    (at s0 = 0.6 L it would turn by 82 deg for a fold that says 120)."""
     raises_naming("s0", jr.make_scene, 60.0, 0.5, s0=s0)
     raises_naming("s0", jr.Strip, psi0=1.0, s0=s0)
+
+
+def test_s0_bound_scales_with_length():
+    jr.make_scene(60.0, 0.5, s0=0.25)
+    jr.Strip(psi0=1.0, s0=0.4, length=2.0)  # 0.2 L
+    raises_naming("s0", jr.Strip, psi0=1.0, s0=0.6, length=2.0)
+
+
+@pytest.mark.parametrize("name, kwargs", [
+    ("psi0", dict(psi0_deg=[60.0, 90.0])), ("gap", dict(gap=np.array([0.3, 0.5]))), ("s0", dict(s0=[0.02])),
+    ("alpha", dict(alpha_deg=(1.0, 2.0))), ("alpha_right", dict(alpha_right_deg=[1.0, 2.0])),
+])
+def test_one_number_per_parameter(name, kwargs):
+    """A list or an array where make_scene takes one number is refused by name (a batch of
+    scenes is `jax.vmap(jr.make_scene)`)."""
+    raises_naming(name, jr.make_scene, **kwargs)
+
+
+@pytest.mark.parametrize("scene", [None, "60/0.5", 0.5])
+def test_not_a_scene(scene):
+    raises_naming("scene", jr.snap_angles, scene)
+    raises_naming("scene", jr.initial_state, scene)
 
 
 @pytest.mark.parametrize("n", [0, 2, 6, 7, 99, 101])

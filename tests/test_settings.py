@@ -231,6 +231,9 @@ CLI_BAD = [
     (["speed-plane", "--n", "0"], "n"),
     (["design", "--target-alpha-up", "60", "--max-iter", "0"], "max-iter"),
     (["design", "--target-speed", "5", "--speed-tol", "2"], "speed-tol"),
+    (["snap", "--scene", "ramp", "--route", "second"], "route"),
+    (["snap-angles", "--contact-thickness", "0.6"], "contact-thickness"),
+    (["snap", "--s0", "0.6"], "s0"),
 ]
 
 

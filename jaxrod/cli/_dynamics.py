@@ -57,7 +57,7 @@ def register(sub):
     p.add_argument("--scene", choices=("brink", "ramp", "asymmetric"), default="brink",
                    help="brink (critical state nudged), ramp (clamps rotated through alpha_c), asymmetric "
                         "(only the right clamp rotated from --alpha-right, left held at --alpha)")
-    p.add_argument("--route", choices=("first", "second"), default="first",
+    p.add_argument("--route", choices=("first", "second"), default=None,
                    help="brink: start at the critical point where the path snaps (first, default) or at the "
                         "next one of its branch past a branch point (second; jaxrod.snap_routes)")
     _add_run_args(p)
@@ -134,7 +134,7 @@ def run_snap(scene, args, kind):
             start, tr = jr.snap_dynamics(scene, args.direction, kind="asymmetric", rate=args.rate,
                                          alpha_start=float(scene.clamps.alpha_right), **kw)
         else:
-            route = getattr(args, "route", "first") if kind == "brink" else "first"
+            route = (getattr(args, "route", None) or "first") if kind == "brink" else "first"
             start, tr = jr.snap_dynamics(scene, args.direction, kind=kind, nudge=args.nudge, rate=args.rate,
                                          route=route, **kw)
     except ValueError as e:
@@ -210,6 +210,9 @@ def _clearance(scene, tr, theta0=None):
 
 def _cmd_snap(args):
     _check_run_args(args)
+    if args.route is not None and args.scene != "brink":
+        raise InputError(f"route: --route chooses the critical point of a brink start; --scene {args.scene} "
+                         "has none (use --scene brink, or leave --route out)")
     phys = _physical(args)
     import jaxrod as jr
 

@@ -228,6 +228,10 @@ def _build_parser():
     return parser
 
 
+CONTACT_THICKNESS_MAX = 0.1
+"""Largest `--contact-thickness` (units of L): a strip ten times thinner than long at most."""
+
+
 def make_scene_from_args(args, contact=None):
     """The scene of the parsed arguments; with self-contact where `--contact-thickness` is
     given, or where `contact` is True (auto mode's second run, default thickness)."""
@@ -236,6 +240,9 @@ def make_scene_from_args(args, contact=None):
     stretching = gravity = None
     model = None
     if contact_mode(args) == "on":
+        if not 0.0 < args.contact_thickness <= CONTACT_THICKNESS_MAX:
+            raise InputError(f"contact-thickness: must lie in (0, {CONTACT_THICKNESS_MAX:g}] (units of L, the "
+                             f"strip's thickness; default 0.01), got {args.contact_thickness:g}")
         try:
             model = jr.Contact(args.contact_thickness)
         except ValueError as e:

@@ -161,6 +161,22 @@ def _crease_arrays(strip):
     return tuple(arrays)
 
 
+S0_MAX = 0.25
+r"""Largest fold width $s_0$ (units of $L$). The centred crease turns by
+$(\pi-\Psi_0)\tanh\frac{L}{2s_0}$ within the strip: at $s_0=0.25L$ by 96.4 % of its fold,
+at $0.1L$ by 99.99 %; a wider profile would make the strip's fold smaller than $\Psi_0$ says."""
+
+
+def _one_number(name, value):
+    """`ValueError` naming `name` where a concrete `value` is not a single number (a list
+    or an array of several values: one scene is built from numbers; batches by `jax.vmap`)."""
+    if value is None or not is_concrete_pair(value, 0.0):
+        return
+    if np.ndim(value) != 0:
+        raise ValueError(f"{name} must be one number (a scene is built from numbers; for a batch of scenes "
+                         f"use jax.vmap(jr.make_scene) over arrays), got {value!r}")
+
+
 class Strip(eqx.Module):
     r"""A strip of length $L$, bending stiffness $B$, mass per length $\lambda$, with
     one crease of fold angle $\Psi_0$ (radians, interior angle; $\pi$ = flat) and fold
@@ -192,6 +208,9 @@ class Strip(eqx.Module):
         if s0 is None:
             s0 = 0.02 * length
         check_param("s0", s0, lo=0.0)
+        if is_concrete_pair(s0, length) and np.all(np.asarray(s0, float) > S0_MAX * np.asarray(length, float)):
+            raise ValueError(f"s0 must lie in (0, {S0_MAX:g} L]: wider, the crease's profile is cut off by the "
+                             f"strip's ends and it turns by less than its fold angle says, got s0={s0!r}")
         if creases is not None and not isinstance(creases, Creases):
             raise ValueError(f"creases must be a jaxrod.Creases or None, got {type(creases).__name__}")
         if creases is not None and is_concrete_pair(creases.positions, length):
@@ -615,9 +634,12 @@ def make_scene(psi0_deg=60.0, gap=0.5, alpha_deg=0.0, *, alpha_right_deg=None, s
     them `psi0_deg` is the centred crease's angle (give 180 for none) and the mesh is refined
     (`refine`) around every crease.
     """
+    for name, value in (("psi0", psi0_deg), ("gap", gap), ("s0", s0), ("alpha", alpha_deg),
+                        ("alpha_right", alpha_right_deg)):
+        _one_number(name, value)
     check_param("psi0", psi0_deg, lo=0.0, hi=180.0, hi_open=False, unit=" deg")
     check_param("gap", gap, lo=0.0, hi=1.0)
-    check_param("s0", s0, lo=0.0)
+    check_param("s0", s0, lo=0.0, hi=S0_MAX, hi_open=False)
     check_param("alpha", alpha_deg)
     d = jnp.pi / 180.0
     a_r = alpha_deg if alpha_right_deg is None else alpha_right_deg

@@ -69,6 +69,12 @@ class Newton(eqx.Module):
 
 
 def float_scene(scene):
+    """`scene` with its numbers as arrays of the scene's float type; `ValueError` naming
+    `scene` for anything that is not a `jaxrod.Scene`."""
+    from ..model import Scene
+
+    if not isinstance(scene, Scene):
+        raise ValueError(f"scene must be a jaxrod.Scene (from jr.make_scene), got {type(scene).__name__}")
     dtype = scene_dtype(scene)
     return jtu.tree_map(lambda x: jnp.asarray(x, dtype) if eqx.is_array_like(x) else x, scene)
 
