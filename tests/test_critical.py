@@ -158,6 +158,7 @@ def test_located_critical_point_derivative_and_verdicts(snap, base, refine):
         assert loc(jnp.asarray(P0), t * jnp.nan, m, a, v, k).result == jr.RESULTS.nonfinite
 
 
+@pytest.mark.slow  # 18 s on 2 cores (two creases at N = 48); the ordinary folds' derivatives are in CI
 def test_derivative_where_a_fold_meets_a_branch_point():
     """Creases of 90 deg at 0.3 L and 0.7 L, G/L = 0.5, N = 48: the snap-up fold lies where
     the asymmetric mode is critical too, so the fold system's Jacobian is all but singular

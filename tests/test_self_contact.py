@@ -385,10 +385,14 @@ def test_contact_in_physical_units():
 
 def test_trajectory_through_itself_is_flagged():
     """Psi0 = 180 deg at G/L = 0.1: without contact the snap's saved frames pass through
-    themselves, and the run says so (`self_intersecting`, not `successful`); with the contact
-    model at N = 24 the same snap is a valid motion."""
+    themselves, and the run says so (`self_intersecting`, not `successful`)."""
     free = jr.make_scene(180, 0.1, n=24)
     _, tr = jr.snap_dynamics(free, "up")
     assert tr.result == jr.RESULTS.self_intersecting
+
+
+@pytest.mark.slow  # 15-25 s of a contact program on 2 cores; contact dynamics are in CI elsewhere
+def test_trajectory_with_contact_is_valid():
+    """The same snap with the contact model at N = 24 is a valid motion."""
     _, tr = jr.snap_dynamics(jr.make_scene(180, 0.1, n=24, contact=jr.Contact()), "up")
     assert tr.result == jr.RESULTS.successful and bool(tr.snapped)
