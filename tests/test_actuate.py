@@ -87,6 +87,25 @@ def test_actuate_bad_input(scene):
         jr.actuate(scene, b, UP, state="left")
     with pytest.raises(ValueError, match="courant"):
         jr.actuate(scene, b, UP, courant=0.7)
+    with pytest.raises(ValueError, match="courant"):
+        jr.actuate(scene, b, UP, solver=jr.Rattle(courant=0.7))
+    with pytest.raises(ValueError, match="courant: given both"):
+        jr.actuate(scene, b, UP, solver=jr.Rattle(courant=0.3), courant=0.2)
+    with pytest.raises(ValueError, match="substeps: given both"):
+        jr.actuate(scene, b, UP, solver=jr.Rattle(substeps=2), substeps=3)
+    with pytest.raises(ValueError, match="solver"):
+        jr.actuate(scene, b, UP, solver=jr.HHT())
+
+
+def test_actuate_takes_its_settings_from_a_rattle():
+    """`solver=jr.Rattle(courant=c, substeps=k)` is `courant=c, substeps=k`; what the object
+    leaves out keeps actuate's defaults (0.45, 4)."""
+    from jaxrod.dynamics._actuate import _rattle_settings
+
+    assert _rattle_settings(None, None, None) == (0.45, 4)
+    assert _rattle_settings(jr.Rattle(courant=0.3, substeps=2), None, None) == (0.3, 2)
+    assert _rattle_settings(jr.Rattle(courant=0.3), None, 6) == (0.3, 6)
+    assert _rattle_settings(jr.Rattle(), 0.2, None) == (0.2, 4)
 
 
 # ----- contact law ------------------------------------------------------------------------

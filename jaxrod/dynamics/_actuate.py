@@ -416,9 +416,30 @@ def _run(scene, bodies, program, theta0, dissipation, t1, dt, substeps, n_sample
         result=res, names=bodies.names)
 
 
+ACTUATE_COURANT, ACTUATE_SUBSTEPS = 0.45, 4
+"""`actuate`'s default RATTLE settings: the strip's step factor and steps per sample."""
+
+
+def _rattle_settings(solver, courant, substeps):
+    """`(courant, substeps)` from `actuate`'s `solver` (None or a `jaxrod.Rattle`) and keywords."""
+    from ._rattle import Rattle
+
+    if solver is not None and not isinstance(solver, Rattle):
+        raise ValueError(f"solver: actuate integrates the strip and its balls with RATTLE; give "
+                         f"jaxrod.Rattle(courant=..., substeps=...) or None, got {solver!r}")
+    for name, kw in (("courant", courant), ("substeps", substeps)):
+        mine = None if solver is None else getattr(solver, name)
+        if mine is not None and kw is not None and mine != kw:
+            raise ValueError(f"{name}: given both as Rattle({name}={mine!r}) and as {name}={kw!r}")
+    pick = lambda kw, attr, default: (kw if kw is not None else  # noqa: E731
+                                      (getattr(solver, attr) if solver is not None and getattr(solver, attr) is not None
+                                       else default))
+    return pick(courant, "courant", ACTUATE_COURANT), pick(substeps, "substeps", ACTUATE_SUBSTEPS)
+
+
 def actuate(scene, bodies: Bodies, program: Program, *, theta0=None, state="down", t1=None,
-            dissipation: Dissipation | None = None, courant=0.45, substeps=4, sample_dt=None,
-            n_frames=96, energy_tol=1e-2) -> Actuation:
+            dissipation: Dissipation | None = None, courant=None, substeps=None, sample_dt=None,
+            n_frames=96, energy_tol=1e-2, solver=None) -> Actuation:
     r"""Run the clamp `program` on the strip of `scene` with the balls of `bodies` (module
     docstring).
 
@@ -427,7 +448,10 @@ def actuate(scene, bodies: Bodies, program: Program, *, theta0=None, state="down
     (default: the program's last knot plus 2 T); `dissipation` (default
     `Dissipation(damping=ACTUATOR_DAMPING, viscosity=ACTUATOR_VISCOSITY)`; `Dissipation()`
     for an undamped run);
-    `courant` the strip's step factor (RATTLE, below 0.5); `substeps` RATTLE steps per sample;
+    `courant` the strip's step factor (RATTLE, below 0.5; default 0.45); `substeps` RATTLE steps
+    per sample (default 4); `solver` a [`jaxrod.Rattle`][] carrying them instead (the balls'
+    contact is integrated with the strip's RATTLE steps: no other solver here; a keyword that
+    contradicts the object is refused by name);
     `sample_dt` the sample spacing (default: one sample per `substeps` steps); `n_frames`
     frames for animations; `energy_tol` the energy balance's tolerance (`energy_drift`).
 
@@ -445,6 +469,7 @@ def actuate(scene, bodies: Bodies, program: Program, *, theta0=None, state="down
                          "building it): float32 cannot hold the energy balance over thousands of contact steps")
     if state not in ("down", "up"):
         raise ValueError(f"state must be 'down' or 'up', got {state!r}")
+    courant, substeps = _rattle_settings(solver, courant, substeps)
     check_number("courant", courant, lo=0.0, hi=0.5)
     check_int("substeps", substeps, lo=1)
     check_int("n_frames", n_frames, lo=2)

@@ -98,7 +98,9 @@ import jax
 import jax.numpy as jnp
 
 from ._scenes import NUDGE, _brink_start, _direction
-from ._simulate import FIXED_STEP, SOLVERS, _rattle_dt_natural, simulate
+from ._implicit import HHT
+from ._rattle import Rattle
+from ._simulate import FIXED_STEP, HHT_N_FINE, SOLVERS, _rattle_dt_natural, simulate
 from .._misc import check_param, dynamics_jit
 from ..branches import snap_angles
 from ..results import RESULTS
@@ -111,25 +113,51 @@ RATTLE_COURANT = 0.45
 RATTLE_MAX_DRIFT = 1e-2
 
 
+def _solver_key(solver):
+    """`snap_speed`'s `solver` as a key: "rattle" (the string or a [`jaxrod.Rattle`][]),
+    "hht" (a [`jaxrod.HHT`][]) or another key of `SOLVERS`; `ValueError` naming `solver`."""
+    if isinstance(solver, Rattle):
+        return "rattle"
+    if isinstance(solver, HHT):
+        return "hht"
+    if isinstance(solver, str) and solver in SOLVERS:
+        return solver
+    raise ValueError(f"solver must be jaxrod.Rattle(...), jaxrod.HHT(...) or one of {sorted(SOLVERS)}, "
+                     f"got {solver!r}")
+
+
+def _courant(solver):
+    """RATTLE's Courant number of `solver` (a `Rattle`'s own, else `RATTLE_COURANT`)."""
+    c = getattr(solver, "courant", None) if isinstance(solver, Rattle) else None
+    return RATTLE_COURANT if c is None else float(c)
+
+
 def default_n_fine(scene, solver="rattle", t1=2.0):
     """The default number of samples on [0, t1]: for RATTLE one per step of its natural step
-    `min(0.45 (h_min/L)^2, DT_CAP)` T (so every sample is a step point and the step is its
-    largest), otherwise 8192 (Tsit5's dense output interpolates between steps)."""
-    if solver in FIXED_STEP:
-        return int(math.ceil(t1 / _rattle_dt_natural(scene, RATTLE_COURANT))) + 1
-    return 8192
+    `min(courant (h_min/L)^2, DT_CAP)` T (courant 0.45 unless a `jaxrod.Rattle` gives it; so
+    every sample is a step point and the step is its largest); for `jaxrod.HHT` `HHT_N_FINE`
+    (its adaptive steps are interpolated by cubic Hermite polynomials); otherwise 8192 (Tsit5's
+    dense output interpolates between steps)."""
+    key = _solver_key(solver)
+    if key in FIXED_STEP:
+        return int(math.ceil(t1 / _rattle_dt_natural(scene, _courant(solver)))) + 1
+    return HHT_N_FINE if key == "hht" else 8192
 
 
 def default_dt(scene, solver="rattle", t1=2.0, n_fine=None):
     r"""The default constant step in units of $T=L^2\sqrt{\lambda/B}$. RATTLE: the largest
     step not above $\min(0.45\,(h_{\min}/L)^2,\ 2\cdot10^{-4})$ that divides the sample
     spacing $t_1/(n_{fine}-1)$ (every sample a step point: RATTLE's output between steps is
-    linear); Tsit5 and the other explicit Runge-Kutta schemes: $0.15\,(h_{\min}/L)^2$."""
-    if solver in FIXED_STEP:
+    linear); Tsit5 and the other explicit Runge-Kutta schemes: $0.15\,(h_{\min}/L)^2$; `jaxrod.HHT`:
+    None (adaptive steps)."""
+    key = _solver_key(solver)
+    if key in FIXED_STEP:
         if n_fine is None:
             n_fine = default_n_fine(scene, solver, t1)
         grid = t1 / (n_fine - 1)
-        return grid / math.ceil(grid / _rattle_dt_natural(scene, RATTLE_COURANT) - 1e-9)
+        return grid / math.ceil(grid / _rattle_dt_natural(scene, _courant(solver)) - 1e-9)
+    if key == "hht":
+        return None  # adaptive: the step is set by HHT's local error test
     f = scene.mesh.fractions
     h = min(f[i + 1] - f[i] for i in range(scene.mesh.n))
     return 0.15 * float(h) ** 2
@@ -171,7 +199,7 @@ def _run(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
     alpha_c = jnp.where(valid, path.alpha_c, 0.0)  # keep the run finite where there is no snap
     start = _brink_start(scene, alpha_c, path.theta_before, path.force_before, path.mode, valid, sgn, past, nudge)
     sc_run = start.scene
-    max_steps = int(math.ceil(t1 / dt)) + 10
+    max_steps = None if dt is None else int(math.ceil(t1 / dt)) + 10
     st = scene.strip
     T = st.length**2 * jnp.sqrt(st.line_density / st.bending_stiffness)  # dt, t1 are in units of T
     # Integrate in the time tau = t / T: the same motion with lambda' = B / L^4 (T' = 1) and
@@ -184,7 +212,7 @@ def _run(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
     tr = simulate(sc_run, start.theta0, start.protocol, t1=t1, dt=dt, solver=solver, direction=sgn,
                   max_steps=max_steps, n_fine=n_fine, n_frames=2)
     spacing = t1 / (n_fine - 1)
-    stopped = tr.t_end < t1 - 2 * dt
+    stopped = tr.t_end < t1 - 2 * (spacing if dt is None else dt)
     peak_ok = tr.t_peak < tr.t_end - 3 * spacing
     ok = (valid & tr.snapped & stopped & peak_ok & (tr.energy_drift < max_drift) & jnp.isfinite(tr.v_s)
           & (tr.result == RESULTS.successful))
@@ -224,13 +252,20 @@ def _speed_jvp(primals, tangents, *, opts):
 
 def _options(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
     _direction(direction)
-    if solver not in SOLVERS:
-        raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {solver!r}")
+    key = _solver_key(solver)
+    if isinstance(solver, Rattle):
+        if solver.substeps is not None:
+            raise ValueError("substeps: snap_speed samples every RATTLE step (n_fine), so Rattle(substeps=...) "
+                             "does not apply; give Rattle(courant=...) or the sample count n_fine")
+        if dt is None:  # the object's Courant number sets the default step; the run is the string's
+            n_fine = default_n_fine(scene, solver, float(t1)) if n_fine is None else n_fine
+            dt = default_dt(scene, solver, float(t1), n_fine)
+        solver = "rattle"
     check_param("nudge", nudge, lo=0.0)
     check_param("past", past, lo=0.0, lo_open=False)
     check_param("t1", t1, lo=0.0)
     if max_drift is None:
-        max_drift = RATTLE_MAX_DRIFT if solver in FIXED_STEP else 1e-3
+        max_drift = RATTLE_MAX_DRIFT if key in FIXED_STEP or key == "hht" else 1e-3
     check_param("max_drift", max_drift, lo=0.0)
     if n_fine is None:
         n_fine = default_n_fine(scene, solver, float(t1))
@@ -238,10 +273,12 @@ def _options(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift):
         raise ValueError(f"n_fine: must be an integer >= 16, got {n_fine!r}")
     if dt is None:
         dt = default_dt(scene, solver, float(t1), n_fine)
-    check_param("dt", dt, lo=0.0)
+    if dt is not None:
+        check_param("dt", dt, lo=0.0)
     if scene.stretching is not None:
         raise ValueError("stretching: the dynamics are exactly inextensible; use stretching=None")
-    return (direction, float(nudge), float(past), float(dt), float(t1), n_fine, solver, float(max_drift))
+    return (direction, float(nudge), float(past), None if dt is None else float(dt), float(t1), n_fine, solver,
+            float(max_drift))
 
 
 def snap_speed(scene, direction="up", *, nudge=NUDGE, past=1e-3, dt=None, t1=2.0, n_fine=None, solver="rattle",
@@ -251,10 +288,13 @@ def snap_speed(scene, direction="up", *, nudge=NUDGE, past=1e-3, dt=None, t1=2.0
     the scene's float leaves ($\Psi_0$, $G$, $s_0$, ...) in forward and reverse mode.
 
     The brink snap (start at the critical state nudged by `nudge` rad RMS along the
-    unstable mode, clamps held `past` rad beyond $\alpha_c$) integrated by `solver` (default
-    `"rattle"`, or `"tsit5"`) with the constant step `dt` (default: RATTLE's
-    $\le\min(0.45\,h_{\min}^2, 2\cdot10^{-4})$, Tsit5's $0.15\,h_{\min}^2$, in units of $T$) on
-    $[0,$`t1`$]$, sampled `n_fine` times (default: every RATTLE step; 8192 for Tsit5);
+    unstable mode, clamps held `past` rad beyond $\alpha_c$) integrated by `solver`: a
+    [`jaxrod.Rattle`][] or `"rattle"` (default), [`jaxrod.HHT`][] (implicit, adaptive steps) or
+    `"tsit5"`, with the constant step `dt` (default: RATTLE's
+    $\le\min(c\,h_{\min}^2, 2\cdot10^{-4})$ with the `Rattle`'s Courant number $c$, 0.45 by
+    default, Tsit5's $0.15\,h_{\min}^2$, in units of $T$; HHT's steps are adaptive unless `dt`
+    is given) on $[0,$`t1`$]$, sampled `n_fine` times (default: every RATTLE step; 4096 for HHT,
+    8192 for Tsit5);
     `max_drift` the largest energy drift trusted (default 1e-2 RATTLE, 1e-3 else); the module
     docstring says why that is smooth and where it is not differentiable. Returns NaN where
     there is no snap (or the run failed one of its checks, see the module docstring).
