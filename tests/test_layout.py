@@ -23,6 +23,28 @@ RANK = {"model": 1, "energy": 2, "linalg": 3, "sweeps": 3, "statics": 4, "branch
 CORE = {"model", "energy", "linalg", "sweeps", "statics", "branches", "dynamics"}
 
 
+def _parse(text):
+    """`ast.parse` on a fresh thread: CPython 3.11.7's AST constructor checks its recursion
+    depth against the thread's, which an earlier test in the same worker can leave off
+    ("SystemError: AST constructor recursion depth mismatch", seen under pytest-xdist)."""
+    import threading
+
+    out = {}
+
+    def run():
+        try:
+            out["tree"] = ast.parse(text)
+        except BaseException as e:  # handed to the caller's thread
+            out["error"] = e
+
+    t = threading.Thread(target=run)
+    t.start()
+    t.join()
+    if "error" in out:
+        raise out["error"]
+    return out["tree"]
+
+
 def _modules():
     for path in sorted((ROOT / "jaxrod").rglob("*.py")):
         parts = list(path.relative_to(ROOT).with_suffix("").parts)
@@ -36,7 +58,7 @@ def _imports(path, parts):
     pkg = parts[:-1] if parts[-1] != "__init__" else parts[:-1]
     if parts[-1] == "__init__":
         pkg = parts[:-1]
-    tree = ast.parse(path.read_text())
+    tree = _parse(path.read_text())
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom):
             if node.level:
@@ -145,7 +167,7 @@ def test_dynamics_imported_on_first_use():
     import jaxrod as jr
     import jaxrod.dynamics as d
 
-    tree = ast.parse((ROOT / "jaxrod" / "__init__.py").read_text())
+    tree = _parse((ROOT / "jaxrod" / "__init__.py").read_text())
     lazy = {a.asname or a.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
             and node.module == "dynamics" for a in node.names}
     assert lazy == set(jr._DYNAMICS) and all(hasattr(d, n) for n in lazy)

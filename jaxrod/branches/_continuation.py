@@ -142,6 +142,11 @@ class Continuation(eqx.Module):
             check_number("tol", self.tol, lo=0.0)
 
 
+STOP_RUNNING, STOP_FULL, STOP_BOUND, STOP_UNSTABLE, STOP_STEP = -1, 0, 1, 2, 3
+"""`Branch.stop`: still running (inside the loop only), the buffer full, the parameter past its
+bound, the stability changed, the step below `ds_min`."""
+
+
 class Branch(eqx.Module):
     """A computed branch: fixed-size buffers, valid up to `count`.
 
@@ -170,7 +175,7 @@ class Branch(eqx.Module):
         step below `ds_min` (3); else `self_intersecting` where a point of it passes through
         itself; else `successful` (the bound, 1, or a loss of stability, 2)."""
         crossed = jnp.zeros((), bool) if self.crossing is None else jnp.any(self.crossing, axis=-1)
-        return RESULTS.where((self.stop == 0) | (self.stop == 3), RESULTS.continuation_incomplete,
+        return RESULTS.where((self.stop == STOP_FULL) | (self.stop == STOP_STEP), RESULTS.continuation_incomplete,
                              RESULTS.where(crossed, RESULTS.self_intersecting, RESULTS.successful))
 
 
@@ -337,7 +342,7 @@ def _continuation_machine(static, parameter, settings, tol, stop_on_instability)
         )
         ds0 = jnp.asarray(settings.ds, dtype)
         return dict(buf=buf, i=jnp.ones((), jnp.int32), t=t0, m=m0, lam=lam0, tau=tau0, ds=ds0,
-                    stop=jnp.full((), -1, jnp.int32), x=predicted(t0, m0, lam0, tau0, ds0),
+                    stop=jnp.full((), STOP_RUNNING, jnp.int32), x=predicted(t0, m0, lam0, tau0, ds0),
                     k=jnp.zeros((), jnp.int32), nu0=nu0)
 
     def step(x, c):
@@ -381,8 +386,9 @@ def _continuation_machine(static, parameter, settings, tol, stop_on_instability)
         out_of_bounds = accept & ((ln < lo) | (ln > hi))
         changed = accept & (nu != nu0) & stop_on_instability
         too_small = decided & (ds_new < settings.ds_min)
-        stop = jnp.where(out_of_bounds, 1, jnp.where(changed, 2, jnp.where(too_small, 3, -1)))
-        stop = jnp.where((stop < 0) & (i_new >= M), 0, stop).astype(jnp.int32)
+        stop = jnp.where(out_of_bounds, STOP_BOUND, jnp.where(changed, STOP_UNSTABLE,
+                                                             jnp.where(too_small, STOP_STEP, STOP_RUNNING)))
+        stop = jnp.where((stop == STOP_RUNNING) & (i_new >= M), STOP_FULL, stop).astype(jnp.int32)
         keep = lambda new, old: jnp.where(accept, new, old)  # noqa: E731
         t, m, lam = keep(tn, t), keep(mn, m), keep(ln, lam)
         tau = jax.tree.map(keep, (nt, nm, nl), tau)
@@ -394,7 +400,7 @@ def _continuation_machine(static, parameter, settings, tol, stop_on_instability)
 
 
     def done(x, c):
-        return (c["stop"] >= 0) | (c["i"] >= M)
+        return (c["stop"] != STOP_RUNNING) | (c["i"] >= M)
 
     def finish(x, c):
         return c["buf"], c["i"], c["stop"]

@@ -79,7 +79,9 @@ from .._misc import check_int, check_number, is_concrete, jit
 from ..results import RESULTS
 
 
-KIND_FOLD, KIND_BRANCH_POINT = 1, 2
+KIND_NONE, KIND_FOLD, KIND_BRANCH_POINT = 0, 1, 2
+"""The kinds of a critical point (`SnapPath.kind`, `CriticalPoint.kind`): none (no snap), a
+fold (limit point in the parameter), a branch point (a mirror-asymmetric mode goes unstable)."""
 
 
 class CriticalPoint(eqx.Module):

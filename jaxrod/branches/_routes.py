@@ -38,7 +38,8 @@ from jaxtyping import Array
 from ..results import RESULTS
 from ..statics import Equilibrium, float_scene, mode_parity
 from .._misc import check_int, check_number, run_if, jit
-from ._continuation import Continuation, SymmetricAlpha, continue_branch, require_float64
+from ._continuation import (STOP_FULL, STOP_STEP, STOP_UNSTABLE, Continuation, SymmetricAlpha, continue_branch,
+                            require_float64)
 from ._critical import located_critical_point
 from ._snap import KIND_BRANCH_POINT, KIND_FOLD, KIND_NONE, SnapAngles, _fh, _is_mirror_symmetric, _refine, snap_angles
 
@@ -105,8 +106,8 @@ def _second(scene_d, path, direction, settings, bound, bisections, tol):
     skipped = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype),
                            jax.eval_shape(run, br.theta[i], br.force[i], br.lam[i]))
     stop, nu_a, t, m, lam, v, kind = run_if(search, run, skipped, (br.theta[i], br.force[i], br.lam[i]))
-    found = search & (stop == 2) & (nu_a <= 2)
-    incomplete = search & ((stop == 0) | (stop == 3) | ((stop == 2) & (nu_a > 2)))
+    found = search & (stop == STOP_UNSTABLE) & (nu_a <= 2)
+    incomplete = search & ((stop == STOP_FULL) | (stop == STOP_STEP) | ((stop == STOP_UNSTABLE) & (nu_a > 2)))
     # the located point as a root of the extended system: the derivative (the scene with its
     # gradients, the state without)
     a0 = jnp.where(found, lam, 0.0)

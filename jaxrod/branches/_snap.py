@@ -37,10 +37,10 @@ from jax import lax
 from jaxtyping import Array
 
 from ..linalg import kkt
-from ._continuation import (Continuation, SymmetricAlpha, _bordered_columns, _pieces, _residual_norm,
-                            continue_branch, require_float64)
+from ._continuation import (STOP_BOUND, STOP_UNSTABLE, Continuation, SymmetricAlpha, _bordered_columns, _pieces,
+                            _residual_norm, continue_branch, require_float64)
 from ..energy.contact import contact_energy, self_intersects, step_bound
-from ._critical import located_critical_point
+from ._critical import KIND_BRANCH_POINT, KIND_FOLD, KIND_NONE, located_critical_point
 from ..energy.geometry import discretize
 from ..energy.lagrangian import positions
 from ..statics import Newton, float_scene, solve_unflagged
@@ -51,7 +51,6 @@ from ..statics import Equilibrium
 from ..statics import mode_parity
 
 
-KIND_NONE, KIND_FOLD, KIND_BRANCH_POINT = 0, 1, 2
 KIND_NAMES = {KIND_NONE: "none", KIND_FOLD: "fold", KIND_BRANCH_POINT: "branch_point"}
 
 
@@ -291,7 +290,7 @@ def _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bise
     start = Equilibrium(t0, m0, RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), sc)
     branch = continue_branch(sc, start, parameter, direction=direction, bounds=(-bound, bound),
                              settings=settings, stop_on_instability=True, check_contact=True)
-    snaps = (branch.stop == 2) & ok0
+    snaps = (branch.stop == STOP_UNSTABLE) & ok0
     t, m, lam, v = _refine(scene, parameter, branch, settings, tol, bisections)
     if isinstance(parameter, SymmetricAlpha):
         asym = (mode_parity(v[:, None])[0] < 0) & _is_mirror_symmetric(t, scene)
@@ -385,7 +384,7 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
     snaps = snaps & done
     # decided without a snap, but not at the parameter bound (stop 1): the continuation
     # gave up (buffer full, step too small); or never decided (every stage supercritical)
-    incomplete = ~done | (~snaps & (stop != 1))
+    incomplete = ~done | (~snaps & (stop != STOP_BOUND))
     # a path that reached the bound without losing stability but whose tangent all but turned
     # in alpha at some computed point (|tau_lam| < NEAR_FOLD): near a cusp the fold pair can be
     # shorter than a step and lie between two computed points, so "no snap" is not known
