@@ -73,6 +73,7 @@ def test_flat_strip_pressed_snaps_symmetrically(with_contact):
     assert float(flat.up.alpha_c) == pytest.approx(-float(flat.down.alpha_c), abs=1e-6)
 
 
+@pytest.mark.slow  # 28 s on 2 cores (a contact dynamics program); the clicks themselves are in CI
 def test_brink_snap_after_contact_clicks(with_contact):
     """Psi0 = 60 deg, G/L = 0.2, snap down with contact: the path clicks before it snaps,
     and the brink run from the snap's critical state (`jr.snap_dynamics`, adaptive) snaps:
@@ -89,7 +90,7 @@ def test_brink_snap_after_contact_clicks(with_contact):
         assert not np_crossings(x[np.all(np.isfinite(x), -1)])
 
 
-@pytest.mark.slow  # 26 s on 2 cores (a CLI program of its own): the clicks themselves are in CI (test_brink_snap_after_contact_clicks)
+@pytest.mark.slow  # 26 s on 2 cores (a CLI program of its own): the clicks themselves are in CI
 def test_cli_reports_contact_clicks(with_contact, capsys):
     """`jaxrod snap-angles` with contact prints each path's clicks before its snap (the
     same numbers as the API's `SnapPath.clicks`); without contact it prints none."""

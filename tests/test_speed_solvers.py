@@ -23,7 +23,21 @@ def scene():
 
 
 def test_rattle_object_is_the_string(scene):
-    """`jr.Rattle()` runs the very program of `"rattle"`: the same v_s and steps."""
+    """`jr.Rattle()` is the string `"rattle"`: the same options, hence the same compiled program
+    (its key) and the same run; `Rattle(courant=c)` differs only in its step."""
+    from jaxrod.dynamics._snap_speed import _options
+
+    args = (scene, "up", 1e-3, 1e-3, None, 2.0, None)
+    base = _options(*args, "rattle", None)
+    assert _options(*args, jr.Rattle(), None) == base
+    slow = _options(*args, jr.Rattle(courant=0.2), None)
+    assert slow[6] == "rattle" and slow[:3] == base[:3] and slow[4:] == base[4:]
+    assert slow[3] <= base[3]
+
+
+@pytest.mark.slow  # a snap_speed program of its own (~12 s on 2 cores)
+def test_rattle_object_runs_as_the_string(scene):
+    """Run both: the same v_s and steps."""
     a = jr.snap_speed_run(scene, solver="rattle")
     b = jr.snap_speed_run(scene, solver=jr.Rattle())
     assert a.result == b.result == jr.RESULTS.successful
