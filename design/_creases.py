@@ -411,11 +411,24 @@ def crease_gap_for_speed(target_speed, creases, *, psi0_deg=180.0, s0=0.02, gap=
 
     if not jax.config.jax_enable_x64:
         raise ValueError("crease_gap_for_speed needs float64; enable it with jax.config.update('jax_enable_x64', True)")
-    if not (math.isfinite(float(target_speed)) and target_speed > 0):
+    def number(name, v):
+        if isinstance(v, bool) or np.ndim(v) != 0:
+            raise ValueError(f"{name} must be a number, got {v!r}")
+        try:
+            return float(v)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be a number, got {v!r}") from None
+
+    target_speed = number("target_speed", target_speed)
+    if not (math.isfinite(target_speed) and target_speed > 0):
         raise ValueError(f"target_speed must be a finite number > 0, got {target_speed!r}")
-    lo, hi = (float(b) for b in bounds)
+    try:
+        lo, hi = (number("bounds", b) for b in bounds)
+    except (TypeError, ValueError):
+        raise ValueError(f"bounds must be a pair (lower, upper) of numbers in (0, 1), got {bounds!r}") from None
     if not 0.0 < lo < hi < 1.0:
         raise ValueError(f"bounds must satisfy 0 < lower < upper < 1, got {bounds!r}")
+    gap = number("gap", gap)
     if not lo < gap < hi:
         raise ValueError(f"gap must lie inside the bounds {bounds!r}, got {gap!r}")
     t0 = time.perf_counter()

@@ -238,6 +238,11 @@ def test_gap_for_speed_bad_input():
         jd.crease_gap_for_speed(20.0, [(0.3, 90.0)], gap=0.99)
     with pytest.raises(ValueError, match="crease 1 position"):
         jd.crease_gap_for_speed(20.0, [(0.3, 90.0), (1.3, 90.0)])
+    # the wrong type, named: no TypeError, no "could not convert string to float"
+    for kwargs, name in ((dict(target_speed="x"), "target_speed"), (dict(target_speed=[20.0, 30.0]), "target_speed"),
+                         (dict(bounds=0.5), "bounds"), (dict(bounds=("a", 0.9)), "bounds"), (dict(gap="a"), "gap")):
+        with pytest.raises(ValueError, match=name):
+            jd.crease_gap_for_speed(**({"target_speed": 20.0, "creases": [(0.3, 90.0)]} | kwargs))
 
 
 @pytest.mark.slow  # Newton through the RATTLE snap of a two-crease strip, then the check (~2 min on 2 cores)
