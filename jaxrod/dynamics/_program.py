@@ -92,10 +92,15 @@ class Program(eqx.Module):
         """Inverse of `to_json`; ValueError naming a missing or bad field."""
         if not isinstance(obj, dict):
             raise ValueError(f"program must be a JSON object with times, alpha_left_deg, alpha_right_deg, got {obj!r}")
+        fields = []
         for key in ("times", "alpha_left_deg", "alpha_right_deg"):
             if key not in obj:
                 raise ValueError(f"program: missing field {key!r} (needs times, alpha_left_deg, alpha_right_deg)")
-        return cls.from_degrees(obj["times"], obj["alpha_left_deg"], obj["alpha_right_deg"])
+            try:
+                fields.append([float(v) for v in obj[key]])
+            except (TypeError, ValueError):
+                raise ValueError(f"program: {key} must be a list of numbers, got {obj[key]!r}") from None
+        return cls.from_degrees(*fields)
 
 
 def hold_and_move(moves, *, start_left=0.0, start_right=0.0, rate=1.0, hold=1.0, t0=0.0) -> Program:
