@@ -37,8 +37,8 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax
-import numpy as np
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 
 from ..energy.geometry import discretize, scene_dtype
