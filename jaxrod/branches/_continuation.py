@@ -292,8 +292,8 @@ def _check_bounds(name, bounds):
 
 def _continuation_machine(static, parameter, settings, tol, stop_on_instability):
     r"""`continue_branch`'s loop as a machine (`jaxrod._lanes`): inputs `(arrays, theta0,
-    force0, lo, hi)`, the scene's arrays (`static` its other leaves), the start state and the
-    bounds; result `(buffers, count, stop)`. One pass of the loop is one corrector iteration
+    force0, lo, hi, direction)`, the scene's arrays (`static` its other leaves), the start
+    state, the bounds and the start direction (+1 or -1); result `(buffers, count, stop)`. One pass of the loop is one corrector iteration
     (the residual at the iterate, and where it is above tolerance the Newton step on the
     bordered system of the module docstring); the pass whose iteration decides the step
     (converged, or given up after `steps` iterations or at a non-finite iterate) also records

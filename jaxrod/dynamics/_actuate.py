@@ -421,20 +421,17 @@ ACTUATE_COURANT, ACTUATE_SUBSTEPS = 0.45, 4
 
 
 def _rattle_settings(solver, courant, substeps):
-    """`(courant, substeps)` from `actuate`'s `solver` (None or a `jaxrod.Rattle`) and keywords."""
+    """`(courant, substeps)` from `actuate`'s `solver` (None or a `jaxrod.Rattle`, merged with
+    the keywords as `jaxrod.simulate` merges them) and keywords, defaults filled in."""
     from ._rattle import Rattle
+    from ._simulate import _resolve_solver
 
     if solver is not None and not isinstance(solver, Rattle):
         raise ValueError(f"solver: actuate integrates the strip and its balls with RATTLE; give "
                          f"jaxrod.Rattle(courant=..., substeps=...) or None, got {solver!r}")
-    for name, kw in (("courant", courant), ("substeps", substeps)):
-        mine = None if solver is None else getattr(solver, name)
-        if mine is not None and kw is not None and mine != kw:
-            raise ValueError(f"{name}: given both as Rattle({name}={mine!r}) and as {name}={kw!r}")
-    pick = lambda kw, attr, default: (kw if kw is not None else  # noqa: E731
-                                      (getattr(solver, attr) if solver is not None and getattr(solver, attr) is not None
-                                       else default))
-    return pick(courant, "courant", ACTUATE_COURANT), pick(substeps, "substeps", ACTUATE_SUBSTEPS)
+    if solver is not None:
+        _, _, courant, substeps = _resolve_solver(solver, courant, substeps)
+    return (ACTUATE_COURANT if courant is None else courant, ACTUATE_SUBSTEPS if substeps is None else substeps)
 
 
 def actuate(scene, bodies: Bodies, program: Program, *, theta0=None, state="down", t1=None,
