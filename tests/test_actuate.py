@@ -221,6 +221,7 @@ def test_damping_from_ringdown(scene):
     assert jr.damping_from_ringdown(np.asarray(a.t), np.asarray(a.fold_height)) == pytest.approx(4.0, rel=0.05)
 
 
+@pytest.mark.slow  # 31-33 s on 2 cores (a reverse-mode contact run); CI keeps the v_s and snap-angle gradients
 def test_program_gradient_matches_central_differences(scene, down):
     """d(launch speed) / d(knot angles) of a one-clamp program, through the run and the
     contact, against central differences. On the scale of a step the hit's discretization
