@@ -46,6 +46,7 @@ A0_N16 = math.radians(74.6)
 FD_SCALE = (0.1, 0.02, 0.1)
 
 
+@pytest.mark.slow  # 23 s; CI checks d v_s/d(crease) against differences (test_crease_design.py)
 def test_vs_gradient_matches_central_differences_small_n():
     """d v_s / d(Psi0, G, s0) by jax.jacrev (implicit derivative of the start state, then
     diffrax's checkpointed reverse pass) equals central differences."""

@@ -11,7 +11,10 @@ otherwise (the first gap, a state that stops existing) from the homotopy of
 [`jaxrod.initial_state`][], as `snap_angles` builds them. `warm_starts` (0, 1 or 2) records
 which. Then `snap_angles` runs from those states without its polish (no derivative) and
 without following the landed branch after a snap (`continue_after_snap=False`), with
-the same $\alpha_c$. Homotopy (51 ms of 93 ms per scene at N = 100) was most of the cost
+the same $\alpha_c$; each path starts from the previous gap's critical point
+(`snap_angles(..., near=)`, checked as `jaxrod.branches._warm` describes) and walks its
+whole branch only where that start fails its checks (the first gap, a change of kind, the
+end of snapping). `warm_paths` (0, 1 or 2) records how many paths were warm. Homotopy (51 ms of 93 ms per scene at N = 100) was most of the cost
 of single calls; `tests/test_phase_diagram.py` checks a small grid against single
 `snap_angles` calls (the same kinds, start codes and landing states).
 $\Psi_0$ and the gaps are traced, so every chunk reuses one compilation (per mesh and grid
@@ -68,12 +71,14 @@ from ..statics import initial_state_signed
 from .._misc import check_grid, fold_widths, package_version, jit
 from ..model import Clamps, Contact, crease_layout, layout_strip, Mesh, Scene
 from ._snap import _snap_angles_from
+from ._warm import near_of, unusable_near
 from ..results import RESULTS
 from ..sweeps import agree, MODES, ShardedMap
 
 VARIABLES = ("alpha_c_up", "alpha_c_down", "kind_up", "kind_down", "fold_height_before_up",
              "fold_height_after_up", "fold_height_before_down", "fold_height_after_down",
-             "start_up", "start_down", "result_up", "result_down", "warm_starts")
+             "start_up", "start_down", "result_up", "result_down", "warm_starts",
+             "warm_paths")
 
 
 def _warm_or_homotopy(scene, sgn, t_prev, m_prev, ok_prev):
@@ -120,7 +125,7 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), con
     N = mesh.n
 
     def one(carry, g):
-        t_prev, m_prev, ok_prev = carry
+        t_prev, m_prev, ok_prev, near = carry
         strip = layout_strip(psi0, s0, layout)
         scene = par.set(float_scene(Scene(strip, Clamps(g), mesh, contact=_contact(contact))), 0.0)
         # both start states through one traced body (`lax.map` over the side): one compiled
@@ -134,7 +139,10 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), con
 
         eqs, warmed = lax.map(start, (jnp.asarray([1.0, -1.0], dtype), t_prev, m_prev, ok_prev))
         starts = eqx.combine(eqs, static)
-        r = _snap_angles_from(scene, starts, settings, jnp.pi, 24, False, continue_after_snap=False)
+        # each path from the previous gap's critical point where that passes the checks of
+        # `jaxrod.branches._warm` (the whole path elsewhere); not where the walks are kept
+        r = _snap_angles_from(scene, starts, settings, jnp.pi, 24, False, continue_after_snap=False,
+                              near_paths=None if keep_branch else near)
         out = {}
         for name, p in (("up", r.up), ("down", r.down)):
             out[f"alpha_c_{name}"] = jnp.degrees(p.alpha_c)
@@ -144,12 +152,16 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), con
             out[f"start_{name}"] = p.start_result._value.astype(jnp.int32)
             out[f"result_{name}"] = p.result._value.astype(jnp.int32)
         out["warm_starts"] = warmed.astype(jnp.int32).sum()
+        out["warm_paths"] = r.up.warm.astype(jnp.int32) + r.down.warm.astype(jnp.int32)
         if keep_branch:
             for name, p in (("up", r.up), ("down", r.down)):
                 out[f"branch_{name}"] = jax.tree.map(lambda x: x[0], p.branch)
-        return (starts.theta, starts.force, starts.result == RESULTS.successful), out
+        near = jax.tree.map(lambda d, u: jnp.stack([d, u]), near_of(r.down), near_of(r.up))
+        return (starts.theta, starts.force, starts.result == RESULTS.successful, near), out
 
-    init = (jnp.zeros((2, N), dtype), jnp.zeros((2, 2), dtype), jnp.zeros((2,), bool))
+    first = unusable_near(N, dtype)
+    init = (jnp.zeros((2, N), dtype), jnp.zeros((2, 2), dtype), jnp.zeros((2,), bool),
+            jax.tree.map(lambda x: jnp.stack([x, x]), first))
     return lax.scan(one, init, gaps)[1]
 
 
@@ -281,7 +293,8 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     point), fold heights before/after each snap, `start_up`/`start_down` (RESULTS codes of
     the start states), `result_up`/`result_down` (RESULTS codes of the whole paths, as
     `SnapPath.result`: not successful where NaN angles do not mean "does not snap"), `warm_starts` (how many of the two start states came from the
-    previous gap, see the module docstring); attribute `computed_chunks` lists the chunks
+    previous gap), `warm_paths` (how many of the two paths started from the previous gap's
+    critical point; see the module docstring); attribute `computed_chunks` lists the chunks
     computed by this call, as `on_chunk` names them
     (the others were read back from `out`), `batch` the mode used, and the provenance
     `jaxrod_version`, `jax_version`, `backend`, `device_count`, `process_count`, `date_utc`

@@ -39,16 +39,17 @@ from jaxtyping import Array
 from ..linalg import kkt
 from ._continuation import (STOP_BOUND, STOP_UNSTABLE, Continuation, SymmetricAlpha, _bordered_columns, _pieces,
                             _residual_norm, continue_branch, require_float64)
-from ..energy.contact import contact_energy, self_intersects, step_bound
+from ..energy.contact import contact_energy, self_intersects
 from ._critical import KIND_BRANCH_POINT, KIND_FOLD, KIND_NONE, located_critical_point
 from ..energy.geometry import discretize
-from ..energy.lagrangian import positions
-from ..statics import Newton, float_scene, solve_unflagged
+from ..statics import Newton, float_scene
 from ..statics import initial_state_signed
 from .._misc import check_bool, check_int, check_number, run_if, jit
 from ..results import RESULTS
 from ..statics import Equilibrium
 from ..statics import mode_parity
+from ._warm import near_of, start_branch, warm_critical
+from ._landing import JUMP_DISTANCE, LANDING_TRIES, _fh, _is_mirror_symmetric, _land  # noqa: F401
 
 
 KIND_NAMES = {KIND_NONE: "none", KIND_FOLD: "fold", KIND_BRANCH_POINT: "branch_point"}
@@ -69,7 +70,9 @@ class SnapPath(eqx.Module):
     landed angle field from the critical one (rad; NaN if it does not snap), `stage` the
     index of the `branch` stage that decided the path (holds the critical point; the stages
     before it were supercritical branch points or contact clicks), `clicks` the number of
-    contact clicks before it (always 0 without self-contact; see `follow_path`).
+    contact clicks before it (always 0 without self-contact; see `follow_path`), `warm` whether the
+    critical point was found from a neighbouring design's (`snap_angles(..., near=)`,
+    `jaxrod.branches._warm`; such a path walked no branch: `branch.count` is 0).
 
     `result` is the whole path's code: `successful`, or the start state's code where it does
     not exist, `continuation_incomplete`, `landing_failed`, `self_intersecting` (the
@@ -107,11 +110,7 @@ class SnapPath(eqx.Module):
     mode: Array | None = None
     stage: Array | None = None
     clicks: Array | None = None
-
-
-def _fh(scene, parameter, t, m, lam):
-    sc = parameter.set(scene, lam)
-    return positions(t, m, sc)[sc.mesh.n // 2, 1]
+    warm: Array | None = None
 
 
 def _refine(scene, parameter, branch, settings, tol, bisections):
@@ -217,81 +216,39 @@ def _refine(scene, parameter, branch, settings, tol, bisections):
     return t, m, lam, v / jnp.linalg.norm(v)
 
 
-LANDING_TRIES = 4
-"""Relaxations a landing may take (see `_land`) before the path is `landing_failed`."""
-
-
-def _land(scene, parameter, t, m, lam, v, direction, up_expected, solver):
-    """Push the critical state along the unstable mode slightly past alpha_c and relax, to a
-    stable equilibrium only (the minimizing Newton flags a saddle `converged_to_saddle`).
-
-    Where the relaxation does not end on a stable state, the landing pushes again, up to
-    `LANDING_TRIES` relaxations in all: from a saddle (a mirror-symmetric relaxation can keep
-    the symmetry of a state that is unstable to an asymmetric mode) along the saddle's unstable
-    mode, otherwise (no equilibrium found) from the critical state along the mode recomputed
-    there, the push doubled from the second such retry on. `v` itself can be non-finite: at a
-    fold, the corrector at the far end of a bisection bracket at round-off (2^-48 of a step, as
-    `design/_actuator.py` asks) solves with a Hessian singular to round-off and can return NaN,
-    and the mode with it (the actuator study's one-sided snaps at N = 32 and 48). Each push
-    goes the way the fold height is expected to move. The retries are a while loop that runs
-    only where a member needs them (under `vmap`, masked for the others). Returns the state,
-    the force, the fold height and the `Equilibrium` of the last relaxation: its `result` is
-    successful only for a stable state."""
-    sc = parameter.set(scene, lam + direction * 1e-3)
-    eps = 0.05
-    newton = Newton(max_steps=200 if scene.contact is None else 2000)
-
-    def relax(t0, m0, u, e):
-        plus = _fh(scene, parameter, t0 + e * u, m0, lam)
-        minus = _fh(scene, parameter, t0 - e * u, m0, lam)
-        pick = jnp.where((plus > minus) == up_expected, 1.0, -1.0)
-        push = pick * e * u
-        if scene.contact is not None:
-            # the push itself may not carry two parts of the strip through each other (as no Newton
-            # step may: `jaxrod.energy.contact.step_bound`); the steps of the relaxation are capped
-            # the same way, and a landing that slides one part along another takes many short steps
-            push = push * step_bound(t0, push, sc)
-        return solve_unflagged(sc, t0 + push, m0, newton)
-
-    def again(c):
-        k, eq = c
-        # a saddle is an equilibrium at the landing angle: push on from it, along the mode of its
-        # lowest (negative) eigenvalue; anything else from the critical state, along its mode
-        saddle = eq.result == RESULTS.converged_to_saddle
-        t0, m0 = jnp.where(saddle, eq.theta, t), jnp.where(saddle, eq.force, m)
-        K = kkt.structured(t0, m0, parameter.set(scene, jnp.where(saddle, lam + direction * 1e-3, lam)))
-        u = kkt.modes(K, kkt.smallest_eigenvalues(K, 1))[:, 0]
-        return k + 1, relax(t0, m0, u, jnp.where(saddle, 1.0, 2.0 ** (k - 1).astype(t.dtype)) * eps)
-
-    _, eq = lax.while_loop(lambda c: ~c[1].converged & (c[0] < LANDING_TRIES), again,
-                           (jnp.ones((), jnp.int32), relax(t, m, v, eps)))
-    return eq.theta, eq.force, _fh(scene, parameter, eq.theta, eq.force, lam + direction * 1e-3), eq
-
-
 CONTACT_STAGES = 6
 """Stages of a path (see `follow_path`) in a scene with self-contact (2 without)."""
-JUMP_DISTANCE = 0.1  # rad, L2 distance of the angle field; see `follow_path`
 NEAR_FOLD = 0.02
 """|tau_lam| below which a path that does not snap is `fold_unresolved` (see `follow_path`)."""
 
 
-def _is_mirror_symmetric(theta, scene):
-    """Whether a state is mirror-symmetric, theta(s) = -theta(L - s), to 1e-6 rad; 1e-4 with
-    self-contact, whose pair sums are not evaluated in mirror-symmetric order: their
-    round-off, amplified by the vanishing asymmetric eigenvalue near a branch point,
-    leaves the bisected critical state asymmetric by up to about 1e-5 rad."""
-    tol = 1e-6 if scene.contact is None else 1e-4
-    return jnp.max(jnp.abs(theta + theta[::-1])) < tol
-
-
-def _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bisections, tol):
-    """Continue from (t0, m0) at parameter lam0 until stability changes; refine; land."""
+def _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bisections, tol, near=None,
+           use_near=False):
+    """Continue from (t0, m0) at parameter lam0 until stability changes; refine; land. With
+    `near` (a `_warm.Near`; used where `use_near`), the critical point from the neighbour's
+    where that passes its checks, the walk and bisection only where it does not. Returns also
+    whether the critical point was the warm one."""
     sc = parameter.set(scene, lam0)
     start = Equilibrium(t0, m0, RESULTS.successful, jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32), sc)
-    branch = continue_branch(sc, start, parameter, direction=direction, bounds=(-bound, bound),
-                             settings=settings, stop_on_instability=True, check_contact=True)
+
+    def walk(start):
+        branch = continue_branch(sc, start, parameter, direction=direction, bounds=(-bound, bound),
+                                 settings=settings, stop_on_instability=True, check_contact=True)
+        return (branch, *_refine(scene, parameter, branch, settings, tol, bisections))
+
+    if near is None:
+        branch, t, m, lam, v = walk(start)
+        warm = jnp.zeros((), bool)
+    else:
+        args = (near, ok0 & use_near)
+        shapes = jax.eval_shape(lambda n, o: warm_critical(scene, n, o, direction, parameter, bound, tol), *args)
+        nothing = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes)
+        critical, warm, _ = run_if(ok0 & use_near & near.usable,
+                                   lambda n, o: warm_critical(scene, n, o, direction, parameter, bound, tol),
+                                   nothing, args)
+        branch0 = start_branch(jax.eval_shape(walk, start)[0], t0, m0, lam0)
+        branch, t, m, lam, v = run_if(~warm, walk, (branch0, *critical), (start,))
     snaps = (branch.stop == STOP_UNSTABLE) & ok0
-    t, m, lam, v = _refine(scene, parameter, branch, settings, tol, bisections)
     if isinstance(parameter, SymmetricAlpha):
         asym = (mode_parity(v[:, None])[0] < 0) & _is_mirror_symmetric(t, scene)
         kind = jnp.where(asym, KIND_BRANCH_POINT, KIND_FOLD)
@@ -302,11 +259,11 @@ def _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bise
     fb = _fh(scene, parameter, t, m, lam)
     v = v / jnp.sqrt(jnp.sum(discretize(scene).h * v**2))  # unit L2 norm, as `critical_point`'s
     # landed: a stable equilibrium (`_land` accepts no other)
-    return branch, snaps, kind, t, m, lam, fb, ta, ma, fa, eq_after.converged & eq_after.stable, v
+    return branch, snaps, kind, t, m, lam, fb, ta, ma, fa, eq_after.converged & eq_after.stable, v, warm
 
 
 def follow_path(scene, start_eq, direction, parameter, settings, bound, bisections, tol, stages=2,
-          continue_after_snap=False, substituted=False):
+                continue_after_snap=False, substituted=False, near=None):
     """One direction of the loop. After a loss of stability the critical state is pushed
     along the unstable mode 1e-3 rad past alpha_c and relaxed. At a fold the strip snaps
     there, however small the jump (past a fold the branch has no equilibrium nearby: the
@@ -315,7 +272,9 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
     asymmetric one); if it lands close by, the instability was supercritical (a stable
     asymmetric branch grows continuously out of the branch point, amplitude
     ~ sqrt(1e-3) ~ 0.03): no snap yet, and the path continues from that state, up to
-    `stages` times. `substituted` (traced bool): the start is the other path's end.
+    `stages` times. `substituted` (traced bool): the start is the other path's end. `near`: a
+    neighbour's path (`jaxrod.branches._warm.Near`) whose critical point the first stage starts
+    from (see `_stage`), or None.
 
     With self-contact, a loss of stability of a state in contact (contact energy above zero)
     whose landing lies within `JUMP_DISTANCE` and leaves the fold height $y(L/2)$ on its side
@@ -334,22 +293,24 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
     def body(c, stage):
         t0, m0, lam0, ok, done, clicks, out = c
         def run(sc, d, args):
-            t0, m0, lam0, ok0 = args
-            return _stage(sc, parameter, t0, m0, lam0, ok0, d, settings, bound, bisections, tol)
+            t0, m0, lam0, ok0, nr, use = args
+            return _stage(sc, parameter, t0, m0, lam0, ok0, d, settings, bound, bisections, tol, near=nr,
+                          use_near=use)
 
-        args = (t0, m0, lam0, ok & ~done)
+        # (the neighbour reaches the stage through the operands, as `run_if` asks)
+        args = (t0, m0, lam0, ok & ~done, near, (stage == 0) & ~jnp.asarray(substituted, bool))
         if continue_after_snap:
             # after a snap the next stage follows the landed branch (to |alpha| = bound or its
             # own loss of stability): the post-snap branch of the hysteresis figures
-            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed, v = run(scene, direction, args)
+            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed, v, warm = run(scene, direction, args)
         else:
             # skip the later stages of a path that has been decided: `run_if`, a loop of at most
             # one pass, not `lax.cond`, which under `vmap` (a batched `done`) would run the whole
             # stage for every member at every stage (2x the continuation work of a phase diagram)
             shapes = jax.eval_shape(lambda a: run(scene, direction, a), args)
             skipped = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
-            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed, v = run_if(~done, run, skipped,
-                                                                           (scene, direction, args))
+            br, snaps, kind, t, m, lam, fb, ta, ma, fa, landed, v, warm = run_if(~done, run, skipped,
+                                                                                 (scene, direction, args))
         w = discretize(scene).h
         dist = jnp.sqrt(jnp.sum(w * (ta - t) ** 2))
         if scene.contact is None:
@@ -363,7 +324,7 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
         # lost stability but the relaxation past alpha_c found no equilibrium (`landed`
         # False: a loss of stability all the same, whose landing is unknown)
         final = ~done & (~snaps | jumped | ~landed)
-        new_out = (snaps, kind, t, m, lam, fb, ta, ma, fa, br.stop, landed, dist, stage, v)
+        new_out = (snaps, kind, t, m, lam, fb, ta, ma, fa, br.stop, landed, dist, stage, v, warm)
         out = jax.tree.map(lambda n, o: jnp.where(final, n, o), new_out, out)
         lam_next = lam + direction * 1e-3
         clicks = clicks + (~done & snaps & landed & click).astype(jnp.int32)
@@ -374,13 +335,13 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
     nan = jnp.full((), jnp.nan, dtype)
     out0 = (jnp.zeros((), bool), jnp.zeros((), jnp.int32), start_eq.theta, start_eq.force, nan, nan,
             start_eq.theta, start_eq.force, nan, jnp.full((), -1, jnp.int32), jnp.ones((), bool), nan,
-            jnp.full((), stages - 1, jnp.int32), jnp.zeros_like(start_eq.theta))
+            jnp.full((), stages - 1, jnp.int32), jnp.zeros_like(start_eq.theta), jnp.zeros((), bool))
     lam0 = parameter.get(start_eq.scene)
     ok0 = start_eq.result == RESULTS.successful
     init = (start_eq.theta, start_eq.force, jnp.asarray(lam0, dtype), ok0, jnp.zeros((), bool),
             jnp.zeros((), jnp.int32), out0)
     (_, _, _, _, done, clicks, out), branches = lax.scan(body, init, jnp.arange(stages, dtype=jnp.int32))
-    snaps, kind, t, m, lam, fb, ta, ma, fa, stop, landed, dist, last_stage, mode = out
+    snaps, kind, t, m, lam, fb, ta, ma, fa, stop, landed, dist, last_stage, mode, warm = out
     snaps = snaps & done
     # decided without a snap, but not at the parameter bound (stop 1): the continuation
     # gave up (buffer full, step too small); or never decided (every stage supercritical)
@@ -423,6 +384,7 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
         stage=last_stage,
         clicks=clicks,
         mode=mode,
+        warm=warm & done,
     )
 
 
@@ -436,7 +398,8 @@ class SnapAngles(eqx.Module):
 
 @jit
 def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float = jnp.pi,
-                bisections: int = 24, polish: bool = True, continue_after_snap: bool = False) -> SnapAngles:
+                bisections: int = 24, polish: bool = True, continue_after_snap: bool = False,
+                near: SnapAngles | None = None) -> SnapAngles:
     r"""Critical clamp angles $\alpha_{c,\rm up}>0$ and $\alpha_{c,\rm down}<0$ of a scene
     under symmetric clamp rotation, their kinds, the states just before and after.
 
@@ -458,6 +421,15 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     at N = 100 ($s_0=0.02$). For the continuum value use
     [`jaxrod.snap_angles_extrapolated`][] (Richardson from $N$ and $2N$, ~1e-5 deg).
 
+    `near`: the `SnapAngles` of a neighbouring scene (the previous design of an optimizer,
+    the previous gap of a sweep; same mesh). Each path then starts from the neighbour's
+    critical point, by Newton's method on the extended system, and is accepted only where
+    it passes the checks of `jaxrod.branches._warm` (an equilibrium at the edge of a stable
+    region, reached from its stable side, a stable landing, no crossing); elsewhere the whole
+    path is computed. An accepted path has `warm` True and no walked `branch`. Its angle is
+    the same critical point's to round-off (~1e-12 deg), at a quarter of the cost. Ignored
+    with self-contact and with `continue_after_snap`.
+
     `bound` must lie in $(0,\pi]$ (rad), `bisections` be a positive integer.
     """
     if not isinstance(settings, Continuation):
@@ -473,14 +445,30 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     # both start states through one traced body (index 0 up, 1 down), one after the other:
     # `lax.map`, not `vmap`, which would batch the LAPACK kernels inside the Newton loops
     # (see `_phase.py` for the XLA:CPU deadlock that batching caused)
-    starts = lax.map(lambda sg: initial_state_signed(scene, sg), jnp.array([1.0, -1.0], scene.strip.psi0.dtype))
-    return _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, continue_after_snap)
+    signs = jnp.array([1.0, -1.0], scene.strip.psi0.dtype)
+    near_paths = None
+    if near is None:
+        starts = lax.map(lambda sg: initial_state_signed(scene, sg), signs)
+    else:
+        if not isinstance(near, SnapAngles):
+            raise ValueError(f"near must be the jaxrod.SnapAngles of a neighbouring scene or None, got {near!r}")
+        if near.up.theta_before.shape != (scene.mesh.n,):
+            raise ValueError(f"near must come from a scene with the same mesh (n = {scene.mesh.n}), "
+                             f"got states of shape {near.up.theta_before.shape}")
+        near_paths = lax.stop_gradient(jax.tree.map(lambda d, u: jnp.stack([d, u]), near_of(near.down),
+                                                    near_of(near.up)))
+        # the up state starts the down path (index 0 of `near_paths`), the down state the up path:
+        # each by Newton from the neighbour's start state, the homotopy where that fails
+        warm = (near_paths.start_theta, near_paths.start_force, near_paths.start_ok)
+        starts = lax.map(lambda a: initial_state_signed(scene, a[0], warm=a[1:])[0], (signs, *warm))
+    return _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, continue_after_snap, near_paths)
 
 
-def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, continue_after_snap=False):
+def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, continue_after_snap=False, near_paths=None):
     """`snap_angles` from given start states (`starts`: the up and down equilibria of the
     scene at alpha = 0 stacked on a leading axis, as `lax.map` of `initial_state_signed` makes
-    them; a member whose `result` is not successful does not exist)."""
+    them; a member whose `result` is not successful does not exist). `near_paths`: a
+    `jaxrod.branches._warm.Near` stacked (down, up) to start each path from, or None."""
     parameter = SymmetricAlpha()
     scene = lax.stop_gradient(scene_d)
     dtype = jnp.result_type(scene.strip.psi0)
@@ -513,8 +501,12 @@ def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, cont
         # with self-contact, legs pressed together mirror-symmetrically break the symmetry at
         # branch points of their own (supercritical: more stages before the snap)
         stages = 2 if scene.contact is None else CONTACT_STAGES
+
+        # each path from the neighbour's critical point where that passes its checks (`_warm`)
+        use_near = near_paths is not None and scene.contact is None and not continue_after_snap
+        near = pick(near_paths, (direction > 0).astype(jnp.int32)) if use_near else None
         path = follow_path(scene, eqx.combine(start, static), direction, parameter, settings, bound, bisections, tol,
-                           stages=stages, continue_after_snap=continue_after_snap, substituted=need_alt)
+                           stages=stages, continue_after_snap=continue_after_snap, substituted=need_alt, near=near)
         br = jax.tree.map(lambda x: x[0], path.branch)  # first stage
         last = br.count - 1
         end_ok = (last >= 0) & (path.start_result == RESULTS.successful)
