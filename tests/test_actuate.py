@@ -179,6 +179,7 @@ def test_a_program_that_snaps_nothing_hits_nothing(scene, down):
     assert float(a.energy_error) < 1e-3
 
 
+@pytest.mark.slow  # 13 s; CI checks energy conservation with contact (test_self_contact.py) and each launch
 def test_energy_balance_closes_over_several_snaps(scene):
     """Up, down, up in one damped run with table friction (clamp work and dissipation in the
     balance): three snaps, the ball struck by the first and slowed to rest by the table."""

@@ -186,6 +186,11 @@ def test_warm_started_chunk_equals_single_calls(chunks):
     down = jr.initial_state(jr.make_scene(30.0, 0.8, 0.0, n=n), "down")
     assert down.result == jr.RESULTS.state_not_found
     assert int(warm.sel(psi0=30.0, gap=0.8)) == 1 and int(warm.sel(psi0=30.0, gap=0.82)) == 1
+    # the paths themselves start from the previous gap's critical points where those pass their
+    # checks (`jaxrod.branches._warm`), and the answers above are the single cold calls' all the same
+    paths = ds["warm_paths"]
+    assert int(paths.sel(psi0=60.0, gap=0.3)) == 0  # first gap: both paths walk their branch
+    assert int(paths.sum()) >= paths.size // 2, paths.values
 
 
 def test_new_fold_angles_compile_nothing(chunks):

@@ -128,6 +128,7 @@ def test_gradient_through_a_warm_path(chain):
     assert abs(float(gw) - float(fd)) <= 1e-5 * abs(float(fd)), (float(gw), float(fd))
 
 
+@pytest.mark.slow  # 11-17 s (the vmapped program); CI checks a batch's isolation on cold paths (test_batch.py)
 def test_batch_with_a_bad_member(chain):
     """`jax.vmap` over scenes and neighbours: a NaN member is flagged `nonfinite`, and the
     others equal their single warm calls."""
@@ -153,18 +154,3 @@ def test_bad_neighbour_is_refused(chain):
         jr.snap_angles(sc, near=other)
     with pytest.raises(ValueError, match="near"):
         jr.snap_angles(sc, near="previous")
-
-
-def test_phase_diagram_paths_are_warm_and_equal_single_calls():
-    """A row of the phase diagram: most paths warm (`warm_paths`), each gap's angles and
-    codes those of its single cold call."""
-    gaps = GAPS[:4]
-    ds = jr.phase_diagram([90.0], gaps, n=N, progress=False)
-    assert int(ds["warm_paths"].values.sum()) >= 2 * (len(gaps) - 1) - 1
-    for j, g in enumerate(gaps):
-        c = jr.snap_angles(_scene(90.0, float(g)))
-        for name in ("up", "down"):
-            p = getattr(c, name)
-            assert abs(float(ds[f"alpha_c_{name}"].values[0, j]) - np.degrees(float(p.alpha_c))) < 1e-8
-            assert int(ds[f"kind_{name}"].values[0, j]) == int(p.kind)
-            assert int(ds[f"result_{name}"].values[0, j]) == int(p.result._value)
