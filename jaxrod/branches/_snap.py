@@ -39,7 +39,7 @@ from jaxtyping import Array
 from ..linalg import kkt
 from ._continuation import (STOP_BOUND, STOP_UNSTABLE, Continuation, SymmetricAlpha, _bordered_columns, _pieces,
                             _residual_norm, continue_branch, require_float64)
-from ..energy.contact import contact_energy, self_intersects
+from ..energy.contact import CONTACT_RESOLUTION, contact_energy, self_intersects, underresolved_contact
 from ._critical import KIND_BRANCH_POINT, KIND_FOLD, KIND_NONE, located_critical_point
 from ..energy.geometry import discretize
 from ..statics import Newton, float_scene
@@ -357,13 +357,23 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
     # computed point of the stages that decided the path (both states through one check)
     through = lax.map(lambda x: self_intersects(x, scene), jnp.stack([t, ta]))
     crossed = through[0] | (snaps & landed & through[1]) | jnp.any(inside & branches.crossing)
+    # a state in contact (the critical or landed one, or a click on the way) on a mesh too coarse
+    # for the contact thickness (`jaxrod.energy.contact.CONTACT_RESOLUTION`)
+    if scene.contact is None:
+        coarse = jnp.zeros((), bool)
+    else:
+        touched = lax.map(lambda x: underresolved_contact(x, scene), jnp.stack([t, ta]))
+        clicked = (clicks > 0) & (jnp.max(discretize(scene).h) > CONTACT_RESOLUTION * scene.contact.thickness)
+        coarse = touched[0] | (snaps & landed & touched[1]) | clicked
     result = RESULTS.where(
         ~ok0, start_eq.result,
         RESULTS.where(incomplete, RESULTS.continuation_incomplete,
                       RESULTS.where(snaps & ~landed, RESULTS.landing_failed,
                                     RESULTS.where(crossed, RESULTS.self_intersecting,
                                                   RESULTS.where(~snaps & near_fold, RESULTS.fold_unresolved,
-                                                                RESULTS.successful)))))
+                                                                RESULTS.where(coarse,
+                                                                              RESULTS.contact_underresolved,
+                                                                              RESULTS.successful))))))
     start_result = RESULTS.where(ok0 & substituted, RESULTS.start_substituted, start_eq.result)
     lost = snaps & ~landed  # no landed state: NaN rather than the failed relaxation's iterate
     return SnapPath(

@@ -63,7 +63,6 @@ import equinox as eqx
 import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
-from jax import lax
 
 from ._equations import accelerations, safe_norm
 from ..energy.contact import contact_energy_nodes

@@ -83,7 +83,9 @@ class Trajectory(eqx.Module):
     stopped early, whose samples up to `t_end` are those computed before the stop;
     `self_intersecting` for a run that went on but one of whose saved frames passes through
     itself, two non-neighbouring segments crossing: not a motion of the model, which then
-    needs `jaxrod.Contact`),
+    needs `jaxrod.Contact`; `contact_underresolved` for one whose saved frames touch in
+    self-contact on a mesh whose segments exceed `jaxrod.energy.contact.CONTACT_RESOLUTION`
+    contact thicknesses),
     `solver_result` (diffrax's own code)."""
 
     t: jax.Array
@@ -468,12 +470,19 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     kin = jnp.where(jnp.isfinite(o["kinetic"]), o["kinetic"], -jnp.inf)
     result = _verdict(sol, jnp.all(jnp.where(jnp.isfinite(sol.ts[0]), jnp.isfinite(E), True)), solver == "hht")
     # a run whose saved frames pass through themselves is not a physical motion of the model
-    from ..energy.contact import self_intersects
+    from ..energy.contact import self_intersects, underresolved_contact
 
     shown = jnp.isfinite(sol.ts[1]) & jnp.all(jnp.isfinite(fr["theta"]), -1)
     crossed = jax.vmap(lambda th: self_intersects(jnp.where(jnp.isfinite(th), th, 0.0), scene))(fr["theta"])
     crossed = jnp.any(crossed & shown)
-    result = RESULTS.where((result == RESULTS.successful) & crossed, RESULTS.self_intersecting, result)
+    # ... or whose saved frames touch on a mesh too coarse for the contact thickness
+    coarse = jnp.zeros((), bool)
+    if scene.contact is not None:
+        coarse = jax.vmap(lambda th: underresolved_contact(jnp.where(jnp.isfinite(th), th, 0.0), scene))(fr["theta"])
+        coarse = jnp.any(coarse & shown)
+    ok = result == RESULTS.successful
+    result = RESULTS.where(ok & crossed, RESULTS.self_intersecting,
+                           RESULTS.where(ok & coarse, RESULTS.contact_underresolved, result))
     return Trajectory(
         t=ts, fold_height=fh, fold_speed=o["fold_speed"], bending=o["bending"], potential=o["potential"],
         kinetic=o["kinetic"], clamp_work=o["work"], constraint=o["constraint"], t_frames=tf,

@@ -333,6 +333,24 @@ def contact_energy(theta, scene, d=None):
     return contact_energy_nodes(inextensible_nodes(theta, d), scene, d)
 
 
+CONTACT_RESOLUTION = 2.5
+"""Longest segment, in contact thicknesses, on which a state in self-contact is resolved: the snap
+angles of Psi0 = 180 deg, G/L = 0.1 with the default `Contact` (thickness 0.01 L) are 81.8, 74.9,
+87.1, 86.4 and 87.1 deg at N = 24, 32, 48, 64 and 96 (h = 4.2, 3.1, 2.1, 1.6 and 1.0 thicknesses)."""
+
+
+def underresolved_contact(theta, scene, d=None):
+    """Whether the state `theta` is in self-contact (contact energy above zero) on a mesh whose
+    longest segment exceeds `CONTACT_RESOLUTION` contact thicknesses (the code
+    `contact_underresolved`). False without contact."""
+    if scene.contact is None:
+        return jnp.zeros((), bool)
+    if d is None:
+        d = discretize(scene)
+    coarse = jnp.max(d.h) > CONTACT_RESOLUTION * scene.contact.thickness
+    return coarse & (contact_energy(theta, scene, d) > 0)
+
+
 def step_bound(theta, step, scene, d=None, margin=0.9):
     r"""The largest $\tau\in(0,1]$ such that no contact pair (`contact_pairs`) can meet
     along the path $\theta+\tau'\,$`step`, $0\le\tau'\le\tau$ (a conservative continuous

@@ -313,11 +313,16 @@ def solve_unflagged(scene, theta0, mu0, solver):
 
 def flag_contact(eq):
     """`eq` with `result` set to `self_intersecting` where it converged to a state that
-    passes through itself (two non-neighbouring segments cross)."""
-    from ..energy.contact import self_intersects
+    passes through itself (two non-neighbouring segments cross), `contact_underresolved` where it
+    converged to a state in self-contact on a mesh too coarse for the contact thickness."""
+    from ..energy.contact import self_intersects, underresolved_contact
 
-    bad = (eq.result == RESULTS.successful) & self_intersects(eq.theta, eq.scene, force=eq.force)
-    return eqx.tree_at(lambda e: e.result, eq, RESULTS.where(bad, RESULTS.self_intersecting, eq.result))
+    ok = eq.result == RESULTS.successful
+    bad = ok & self_intersects(eq.theta, eq.scene, force=eq.force)
+    coarse = ok & underresolved_contact(eq.theta, eq.scene)
+    return eqx.tree_at(lambda e: e.result, eq,
+                       RESULTS.where(bad, RESULTS.self_intersecting,
+                                     RESULTS.where(coarse, RESULTS.contact_underresolved, eq.result)))
 
 
 @jit
