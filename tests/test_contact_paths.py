@@ -118,13 +118,12 @@ def test_cli_reports_contact_clicks(with_contact, capsys):
 
 def test_contact_too_thin_for_the_mesh_is_flagged(with_contact):
     """Psi0 = 180 deg, G/L = 0.1 at N = 48 (segments of 0.021 L): with the default thickness (0.01 L,
-    2.1 thicknesses a segment) both paths are successful; with 0.008 L (2.6 a segment, past
-    `CONTACT_RESOLUTION`) the pressed critical states are flagged `contact_underresolved`."""
+    2.1 thicknesses a segment) both paths are successful (`test_flat_strip_pressed_snaps_symmetrically`);
+    with 0.008 L (2.6 a segment, past `CONTACT_RESOLUTION`) the pressed critical states are flagged
+    `contact_underresolved`."""
     from jaxrod.energy.contact import CONTACT_RESOLUTION
 
     assert 1.0 / N < CONTACT_RESOLUTION * 0.01 and 1.0 / N > CONTACT_RESOLUTION * 0.008
-    ok = with_contact(_scene(180.0, 0.1))
-    assert ok.up.result == ok.down.result == jr.RESULTS.successful
     thin = with_contact(jr.make_scene(180.0, 0.1, n=N, contact=jr.Contact(thickness=0.008)))
     assert thin.up.result == thin.down.result == jr.RESULTS.contact_underresolved
     assert np.isfinite(float(thin.up.alpha_c))  # the values are kept, flagged

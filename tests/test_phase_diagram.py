@@ -556,3 +556,33 @@ def test_s0_axis_as_one_vmapped_call():
     vm = jr.phase_diagram(psis, gaps, s0=widths, n=24, batch="vmap", progress=False)
     for w in widths:
         _assert_width_equals(vm, w, jr.phase_diagram(psis, gaps, s0=w, n=24, batch="scan", progress=False))
+
+
+def test_figure_marks_flagged_points_apart():
+    """A point whose path is not successful is drawn as a red-edged triangle off the curve, with
+    its own legend entry; the legend says which markers are snap up and snap down. A synthetic
+    dataset: the figure reads nothing else."""
+    import xarray as xr
+
+    from jaxrod.plot._statics import phase_figure
+
+    gaps = np.array([0.1, 0.3, 0.5])
+    up, dn = np.array([[50.0, 60.0, 70.0]]), np.array([[-50.0, -60.0, -70.0]])
+    res_up = np.array([[int(jr.RESULTS.self_intersecting._value), 0, 0]], np.int32)
+    zeros = np.zeros((1, 3), np.int32)
+    ds = xr.Dataset({"alpha_c_up": (("psi0", "gap"), up), "alpha_c_down": (("psi0", "gap"), dn),
+                     "kind_up": (("psi0", "gap"), zeros + 1), "kind_down": (("psi0", "gap"), zeros + 1),
+                     "result_up": (("psi0", "gap"), res_up), "result_down": (("psi0", "gap"), zeros)},
+                    coords={"psi0": [60.0], "gap": gaps})
+    ax = phase_figure(ds).axes[0]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any(lab.startswith("flagged") for lab in labels), labels
+    assert "snap up (filled)" in labels and "snap down (open)" in labels
+    curve = [ln for ln in ax.get_lines() if ln.get_label() == "Ψ0 = 60°"][0]
+    assert np.isnan(curve.get_ydata()[0]) and curve.get_ydata()[1] == 60.0  # off the curve
+    marks = [ln for ln in ax.get_lines() if ln.get_marker() == "^" and len(ln.get_xdata())]
+    assert len(marks) == 1 and list(marks[0].get_ydata()) == [50.0] and marks[0].get_markeredgecolor() == "red"
+    # a dataset whose every path is successful has no flagged entry
+    ok = ds.assign(result_up=(("psi0", "gap"), zeros))
+    labels = [t.get_text() for t in phase_figure(ok).axes[0].get_legend().get_texts()]
+    assert not any(lab.startswith("flagged") for lab in labels)

@@ -110,6 +110,7 @@ def test_point_reached_the_other_way_is_rejected(chain):
     assert bool(checks["edge"]) and bool(checks["equilibrium"])
 
 
+@pytest.mark.slow  # 8-14 s (the derivative's program); CI checks snap-angle derivatives of cold paths, whose rule a warm path shares
 def test_gradient_through_a_warm_path(chain):
     """d alpha_c / d Psi0 through a warm path (its polish's implicit derivative, the cold
     path's derivative rule at the same point) equals central differences of cold calls."""

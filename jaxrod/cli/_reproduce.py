@@ -219,12 +219,21 @@ def section_master_curves(cache, n, out, progress, quick=False):
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
     rows = []
+    flagged_any = False
     for k, p in enumerate(psis):
         up = [data[(p, float(g))]["alpha_up"] for g in gaps]
         dn = [data[(p, float(g))]["alpha_down"] for g in gaps]
         c = f"C{k}"
-        ax.plot(gaps, [np.nan if v is None else v for v in up], "o-", color=c, label=f"Psi0 = {p:g} deg")
-        ax.plot(gaps, [np.nan if v is None else v for v in dn], "s--", color=c)
+        # a path that is not successful (a state through itself, an unknown outcome) is drawn
+        # apart from the curve, as a red-edged open triangle
+        for vals, key, style in ((up, "result_up", "o-"), (dn, "result_down", "s--")):
+            bad = np.array([data[(p, float(g))].get(key, "successful") != "successful" and v is not None
+                            for g, v in zip(gaps, vals)])
+            y = np.array([np.nan if v is None else v for v in vals], float)
+            flagged_any |= bool(bad.any())
+            ax.plot(gaps, np.where(bad, np.nan, y), style, color=c,
+                    label=f"Psi0 = {p:g} deg" if key == "result_up" else None)
+            ax.plot(np.asarray(gaps)[bad], y[bad], "^", color=c, markerfacecolor="none", markeredgecolor="red")
         last_up = max([float(g) for g, v in zip(gaps, up) if v is not None], default=None)
         last_dn = max([float(g) for g, v in zip(gaps, dn) if v is not None], default=None)
         rows.append((f"largest sampled G/L that snaps, Psi0 = {p:g} deg", "grows with Psi0; never ends at 180",
@@ -235,11 +244,16 @@ def section_master_curves(cache, n, out, progress, quick=False):
     ax.set_xlabel("G / L")
     ax.set_ylabel("alpha_c (deg): up (solid), down (dashed)")
     ax.axhline(0, color="k", lw=0.5)
+    if flagged_any:
+        ax.plot([], [], "^", color="0.4", markerfacecolor="none", markeredgecolor="red",
+                label="flagged: not successful (e.g. passes through itself)")
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(os.path.join(out, "master_curves.png"), dpi=120)
     text = (f"alpha_c against G/L for several fold angles (N = {n}); branches that stop snapping end "
-            "at the termination gap G*(Psi0). ![master curves](master_curves.png)")
+            "at the termination gap G*(Psi0). Red-edged open triangles: paths that are not successful (at "
+            "small gaps the contact-free strip passes through itself; `jaxrod snap-angles` models self-contact "
+            "there). ![master curves](master_curves.png)")
     return "Master curves and termination gap", text, rows, {f"{p}/{g}": v for (p, g), v in data.items()}
 
 

@@ -243,15 +243,18 @@ def plot_hysteresis(h, path, title=None):
     return _save(fig, path)
 
 
-def plot_phase_diagram(ds, path, termination_gaps=None, title=None):
-    r"""Write the phase diagram of an `xarray.Dataset` from [`jaxrod.phase_diagram`][]
-    like the paper's Fig. 2c: $\alpha_{c,\rm up}$ (above zero, filled circles) and
-    $\alpha_{c,\rm down}$ (below zero, open circles) vs $G/L$, one colour per $\Psi_0$;
-    branch points marked with a cross. A dataset with an `s0` dimension gets one panel per
-    fold width (up to three in a row, on a shared angle axis). `termination_gaps`, a dict
-    `{psi0_deg: (G*_up, G*_down)}` (with an `s0` dimension either that, for every panel, or
-    `{s0: {psi0_deg: (G*_up, G*_down)}}`, one per panel), adds dashed vertical lines.
-    **Returns:** `path`."""
+def _flagged(ds, direction, psi, values):
+    """Where the `direction` path's angle is a number but its `result_{direction}` is not
+    `successful` (all False for a dataset without result codes)."""
+    name = f"result_{direction}"
+    if name not in ds:
+        return np.zeros(values.shape, bool)
+    codes = np.asarray(ds[name].sel(psi0=psi).values)
+    return (codes != int(RESULTS.successful._value)) & np.isfinite(values)
+
+
+def phase_figure(ds, termination_gaps=None, title=None):
+    """The matplotlib `Figure` that [`plot_phase_diagram`][] writes."""
     import matplotlib
 
     widths = [float(w) for w in ds["s0"].values] if "s0" in ds.dims else [None]
@@ -262,6 +265,8 @@ def plot_phase_diagram(ds, path, termination_gaps=None, title=None):
     psis = np.asarray(ds["psi0"].values, float)
     g = np.asarray(ds["gap"].values, float)
     first = None
+    any_flagged = any(bool(np.any(np.asarray(ds[f"result_{d}"].values) != 0)) for d in ("up", "down")
+                      if f"result_{d}" in ds)
     for j, w in enumerate(widths):
         ax = fig.add_subplot(rows, cols, j + 1, sharey=first)
         if first is None:
@@ -276,10 +281,19 @@ def plot_phase_diagram(ds, path, termination_gaps=None, title=None):
             dn = np.asarray(sub["alpha_c_down"].sel(psi0=psi).values, float)
             ku = np.asarray(sub["kind_up"].sel(psi0=psi).values)
             kd = np.asarray(sub["kind_down"].sel(psi0=psi).values)
-            ax.plot(g, up, "o-", color=c, markersize=4, linewidth=1.2, label=f"Ψ0 = {psi:g}°")
-            ax.plot(g, dn, "o--", color=c, markersize=4, markerfacecolor="white", linewidth=1.2)
-            for y, k in ((up, ku), (dn, kd)):
-                bp = k == 2
+            # a point whose path is not `successful` (it passes through itself, its outcome is
+            # unknown, ...) is drawn apart, never as an ordinary marker on the curve
+            bad_up, bad_dn = _flagged(sub, "up", psi, up), _flagged(sub, "down", psi, dn)
+            any_flagged |= bool(bad_up.any() or bad_dn.any())
+            ax.plot(g, np.where(bad_up, np.nan, up), "o-", color=c, markersize=4, linewidth=1.2,
+                    label=f"Ψ0 = {psi:g}°")
+            ax.plot(g, np.where(bad_dn, np.nan, dn), "o--", color=c, markersize=4, markerfacecolor="white",
+                    linewidth=1.2)
+            for y, bad in ((up, bad_up), (dn, bad_dn)):
+                ax.plot(g[bad], y[bad], "^", color=c, markersize=6, markerfacecolor="none",
+                        markeredgecolor="red", markeredgewidth=1.0)
+            for y, k, bad in ((up, ku, bad_up), (dn, kd, bad_dn)):
+                bp = (k == 2) & ~bad
                 ax.plot(g[bp], y[bp], "x", color="k", markersize=4, linewidth=0.8)
             if tg and psi in tg:
                 for gs, ls in zip(tg[psi], ("-.", ":")):
@@ -291,7 +305,12 @@ def plot_phase_diagram(ds, path, termination_gaps=None, title=None):
             ax.set_ylabel("α_c (deg): snap up > 0, snap down < 0")
         ax.grid(True, linewidth=0.3, alpha=0.5)
         if j == 0:
+            ax.plot([], [], "o-", color="0.4", markersize=4, label="snap up (filled)")
+            ax.plot([], [], "o--", color="0.4", markersize=4, markerfacecolor="white", label="snap down (open)")
             ax.plot([], [], "x", color="k", label="branch point (else fold)")
+            if any_flagged:
+                ax.plot([], [], "^", color="0.4", markerfacecolor="none", markeredgecolor="red",
+                        label="flagged: not successful (result_up/down)")
             if tg:
                 ax.plot([], [], "-.", color="0.4", label="G* snap up")
                 ax.plot([], [], ":", color="0.4", label="G* snap down")
@@ -303,4 +322,18 @@ def plot_phase_diagram(ds, path, termination_gaps=None, title=None):
     if widths[0] is not None:
         fig.suptitle(title or "critical clamp angles (symmetric actuation)", fontsize=10)
     fig.tight_layout()
-    return _save(fig, path)
+    return fig
+
+
+def plot_phase_diagram(ds, path, termination_gaps=None, title=None):
+    r"""Write the phase diagram of an `xarray.Dataset` from [`jaxrod.phase_diagram`][]
+    like the paper's Fig. 2c: $\alpha_{c,\rm up}$ (above zero, filled circles) and
+    $\alpha_{c,\rm down}$ (below zero, open circles) vs $G/L$, one colour per $\Psi_0$;
+    branch points marked with a cross; a point whose path is not `successful` (`result_up`,
+    `result_down`: a state through itself, an unknown outcome) as a red-edged open triangle, off
+    the curve, with its own legend entry. A dataset with an `s0` dimension gets one panel per
+    fold width (up to three in a row, on a shared angle axis). `termination_gaps`, a dict
+    `{psi0_deg: (G*_up, G*_down)}` (with an `s0` dimension either that, for every panel, or
+    `{s0: {psi0_deg: (G*_up, G*_down)}}`, one per panel), adds dashed vertical lines.
+    **Returns:** `path`."""
+    return _save(phase_figure(ds, termination_gaps, title), path)
