@@ -155,7 +155,7 @@ NOTES = [
     "as its slowest member); one start after the other (`lax.map`, chunks of 1) is 3x faster at B = 64, and "
     "is `design.optimize`'s default on the CPU (`batch_size=\"auto\"`). B = 1024 as one `vmap` is not run: it "
     "did not finish within 420 s, and study (a) with 4 starts as one `vmap` can stall at 0 % CPU (the XLA:CPU "
-    "batched-LAPACK deadlock of README 'Known limitations'); with the sequential default it finishes in the "
+    "batched-LAPACK deadlock of docs/limitations.md); with the sequential default it finishes in the "
     "time above.",
     "Study (a) row: 4 starts on n = 40, the best refined on n = 160 (iterations: coarse best + refinement), "
     "re-checked by an independent `snap_angles` at n = 320 (0.1 deg tolerance). The first table's study (a) is a "

@@ -360,7 +360,7 @@ def optimize(terms, param: Parametrization | None = None, z0=None, *, n: int = 4
     designs/s), 2.58 s in chunks of 8 and 1.83 s one by one (35.0 designs/s); 1024 starts
     one by one 26.0 s (39.3 designs/s). Batched, every loop runs as long as its slowest
     member and XLA:CPU gains nothing from the batch; a 4-start `vmap` of study (a) also hit
-    the XLA:CPU deadlock of README "Known limitations" once.
+    the XLA:CPU deadlock of docs/limitations.md once.
     """
     terms = tuple(terms)
     if not terms:

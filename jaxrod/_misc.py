@@ -211,7 +211,7 @@ def clear_caches():
     """Release the compiled programs of jaxrod and JAX (`jax.clear_caches`): the next call
     of each entry point traces and compiles again. A process that compiles thousands of
     distinct programs (many meshes) can reach Linux's limit on memory mappings without it
-    (README, "Known limitations")."""
+    (docs/limitations.md)."""
     jax.clear_caches()
     clear_programs()
 

@@ -173,13 +173,27 @@ def test_dynamics_imported_on_first_use():
     assert lazy == set(jr._DYNAMICS) and all(hasattr(d, n) for n in lazy)
 
 
-def test_readme_lists_every_result_code():
-    """The README's result-code table has a row for every member of `jaxrod.RESULTS`."""
+def test_result_code_table_lists_every_code():
+    """The result-code table (docs/results.md) has a row for every member of `jaxrod.RESULTS`."""
     import jaxrod as jr
 
-    text = (ROOT / "README.md").read_text()
-    table = text[text.index("### Result codes"):]
+    text = (ROOT / "docs" / "results.md").read_text()
+    table = text[text.index("# Result codes"):]
     table = table[:table.index("\n\n", table.index("| code |"))]
     rows = [line for line in table.splitlines() if line.startswith("| `")]
     listed = {name for line in rows for name in re.findall(r"`(\w+)`", line.split("|")[1])}
     assert set(jr.RESULTS._name_to_item) <= listed, sorted(set(jr.RESULTS._name_to_item) - listed)
+
+
+def test_readme_is_short_and_every_relative_link_resolves():
+    """The README stays a user's page (at most 200 lines, the details in docs/), and every
+    relative link of the README and of docs/*.md points at a file that exists."""
+    readme = ROOT / "README.md"
+    assert len(readme.read_text().splitlines()) <= 200
+    missing = []
+    for f in [readme, *sorted((ROOT / "docs").glob("*.md"))]:
+        for target in re.findall(r"\]\(([^)\s]+)\)", f.read_text()):
+            path = target.split("#")[0]
+            if path and not re.match(r"^(https?:|mailto:)", target) and not (f.parent / path).exists():
+                missing.append((f.name, target))
+    assert not missing, missing

@@ -564,7 +564,7 @@ def test_figure_marks_flagged_points_apart():
     dataset: the figure reads nothing else."""
     import xarray as xr
 
-    from jaxrod.plot._statics import phase_figure
+    from jaxrod.plot import phase_figure
 
     gaps = np.array([0.1, 0.3, 0.5])
     up, dn = np.array([[50.0, 60.0, 70.0]]), np.array([[-50.0, -60.0, -70.0]])

@@ -48,7 +48,7 @@ def require_float64(dtype, what):
         raise ValueError(
             f"{what} needs float64; enable it with jax.config.update('jax_enable_x64', True) "
             "before building the scene (float32 is supported only by solve_equilibrium and "
-            "initial_state, to the tolerance in the README's 'Result codes' section)"
+            "initial_state, to the tolerance in docs/results.md)"
         )
 
 
