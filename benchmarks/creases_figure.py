@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""The README's two-crease figure: the quasi-static hysteresis loop of a strip with two
+"""The two-crease figure of docs/guide.md: the quasi-static hysteresis loop of a strip with two
 creases (90 deg at 0.3 L and 0.65 L, G/L = 0.5, N = 96) and its states at alpha = 0 and
 just before each snap.
 
