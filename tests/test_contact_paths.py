@@ -116,6 +116,7 @@ def test_cli_reports_contact_clicks(with_contact, capsys):
             assert "clicks_down" not in rec
 
 
+@pytest.mark.slow  # 11 s of contact snaps; CI checks the flag on equilibria (test_self_contact.py)
 def test_contact_too_thin_for_the_mesh_is_flagged(with_contact):
     """Psi0 = 180 deg, G/L = 0.1 at N = 48 (segments of 0.021 L): with the default thickness (0.01 L,
     2.1 thicknesses a segment) both paths are successful (`test_flat_strip_pressed_snaps_symmetrically`);

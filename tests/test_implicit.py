@@ -194,6 +194,7 @@ def test_bad_solver_combinations(brink24):
         jr.simulate(brink24.scene, brink24.theta0, brink24.protocol, t1=1e12)
 
 
+@pytest.mark.slow  # 4-7 s; CI checks the Rattle object through actuate and snap_speed
 def test_rattle_object_is_the_string(brink24):
     """jr.Rattle(courant=c) runs exactly what solver='rattle', courant=c runs."""
     a = _run(brink24, solver=jr.Rattle(courant=0.3))

@@ -197,3 +197,13 @@ def test_readme_is_short_and_every_relative_link_resolves():
             if path and not re.match(r"^(https?:|mailto:)", target) and not (f.parent / path).exists():
                 missing.append((f.name, target))
     assert not missing, missing
+
+
+def test_citation_names_the_package_version():
+    """CITATION.cff (the software and the paper it reproduces) carries the installed version."""
+    import jaxrod as jr
+
+    text = (ROOT / "CITATION.cff").read_text()
+    assert re.search(r"^cff-version: 1\.2\.0$", text, re.M)
+    assert re.search(r"^version: (\S+)$", text, re.M).group(1) == jr.__version__
+    assert "Augmented snap-through instability of folded strips" in text

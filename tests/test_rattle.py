@@ -119,6 +119,7 @@ def test_bad_courant(brink24, courant):
         _run(brink24, courant=courant)
 
 
+@pytest.mark.slow  # 7 s; CI runs substeps through the actuator (test_actuate.py)
 def test_substeps_take_the_same_steps(brink24):
     """`substeps=4` with a macro step of 4e-4 takes the same RATTLE steps as 1e-4 without
     substeps: the samples every 4e-4 agree to round-off (1e-8), and so does v_s; bad values

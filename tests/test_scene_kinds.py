@@ -11,6 +11,7 @@ def scene():
     return jr.make_scene(60, 0.5, n=16)
 
 
+@pytest.mark.slow  # 9 s (two runs); CI checks that contradicting keywords are refused
 def test_brink_object_is_the_string(scene):
     kw = dict(solver=jr.Rattle(courant=0.3), t1=2.0)
     s1, a = jr.snap_dynamics(scene, "up", kind=jr.Brink(nudge=0.02), **kw)
