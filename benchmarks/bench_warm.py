@@ -115,6 +115,37 @@ def main(argv=None):
     design = [[jr.make_scene(60.0 + 0.5 * k, 0.5, n=n) for k in range(steps)]]
     rows["optimizer_steps"] = _chains(design, cold_fn, warm_fn, args.repeats)
 
+    # an inverse design: `jaxrod.design.optimize` (Levenberg-Marquardt, the CPU default of one start
+    # after the other), each start's iterations warm-started from its previous iterate, against the
+    # same run with every path walked (`_first_near` -> None)
+    import jaxrod.design as ds
+    import jaxrod.design._optimize as opt
+
+    terms = (ds.AlphaUp(target=70.0, tol=0.05), ds.AlphaDown(target=-84.0, tol=0.05))
+    param = ds.Parametrization()
+    z0 = jnp.asarray(np.random.default_rng(0).normal(size=(2 if args.quick else 8, 2)))
+    dn = 24 if args.quick else 40
+
+    def design_runs():
+        ds.optimize(terms, param, z0, n=dn, progress=False)
+        runs, res = [], None
+        for _ in range(args.repeats):
+            t = time.perf_counter(); res = ds.optimize(terms, param, z0, n=dn, progress=False)  # noqa: E702
+            runs.append(time.perf_counter() - t)
+        return float(np.median(runs)), res
+
+    tw, rw = design_runs()
+    first = opt._first_near
+    opt._first_near = lambda problem, b: None
+    try:
+        tc, rc = design_runs()
+    finally:
+        opt._first_near = first
+    rows["design"] = dict(starts=int(z0.shape[0]), n=dn, warm_s=tw, cold_s=tc, speedup=tc / tw,
+                          max_dvalue=float(np.nanmax(np.abs(np.asarray(rw.values) - np.asarray(rc.values)))),
+                          status_equal=bool(np.array_equal(np.asarray(rw.status), np.asarray(rc.status))),
+                          reached=int(rw.num_reached))
+
     from jaxrod.branches._phase import _chunk
 
     pgaps = jnp.asarray(np.linspace(*GAP_BOX, 41))
@@ -149,6 +180,11 @@ def main(argv=None):
         lines.append(f"| {label} | {r['members']} | {r['warm_paths']} of {r['paths']} | {r['cold_per_member_ms']:.1f} "
                      f"| {r['warm_per_member_ms']:.1f} | {r['speedup']:.2f}x | {r['max_dalpha_deg']:.1e} | "
                      f"{'yes' if r['codes_equal'] else '**no**'} |")
+    de = rows["design"]
+    lines.append(f"| `jaxrod.design.optimize`: AlphaUp 70 and AlphaDown -84 deg over (Psi0, G/L), {de['starts']} starts, "
+                 f"N = {de['n']}, whole runs | {de['starts']} | – | {1e3 * de['cold_s']:.0f} (run) | "
+                 f"{1e3 * de['warm_s']:.0f} (run) | {de['speedup']:.2f}x | max \\|d value\\| {de['max_dvalue']:.1e} | "
+                 f"{'yes' if de['status_equal'] else '**no**'} ({de['reached']} reached) |")
     lines += [
         "",
         f"Phase-diagram row (`_chunk`, Psi0 = 90 deg, 41 gaps, one compiled call, warm paths): {ph['call_s']:.3f} s, "

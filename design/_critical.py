@@ -36,6 +36,7 @@ import jax
 import jax.numpy as jnp
 
 import jaxrod as jr
+from jaxrod.branches._warm import near_pair
 from jaxrod.linalg import batched
 
 
@@ -52,6 +53,7 @@ class Critical(eqx.Module):
     kind_down: jax.Array
     result_up: jr.RESULTS
     result_down: jr.RESULTS
+    near: object = None
 
 
 def design_scene(psi0, gap, s0, n):
@@ -93,12 +95,25 @@ def critical_sensitivity(theta, force, alpha, params, kind, n):
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(3,))
-def critical_angles(psi0, gap, s0, n: int = 40) -> Critical:
+def critical_angles(psi0, gap, s0, n: int = 40, near=None) -> Critical:
     r"""[`Critical`][] angles of the design (Psi0 in radians, G/L, s0/L) on an `n`-segment mesh,
-    differentiable in (psi0, gap, s0) (forward and reverse mode; see the module docstring)."""
-    r = jr.snap_angles(design_scene(psi0, gap, s0, n))
+    differentiable in (psi0, gap, s0) (forward and reverse mode; see the module docstring).
+    `near`: what a neighbouring design's `Critical.near` kept of its paths (an optimizer's
+    previous iterate): each path then starts from that design's critical point where the checks
+    of `jaxrod.branches._warm` hold (`jaxrod.snap_angles(..., near=)`); `near` carries no
+    derivative. `Critical.near` holds this design's, for the next."""
+    return _critical_values(psi0, gap, s0, n, near)
+
+
+def _snap(psi0, gap, s0, n, near):
+    r = jr.snap_angles(design_scene(psi0, gap, s0, n), near=near)
+    return r, near_pair(r)
+
+
+def _critical_values(psi0, gap, s0, n, near):
+    r, pair = _snap(psi0, gap, s0, n, near)
     return Critical(r.up.alpha_c, r.down.alpha_c, r.up.snaps, r.down.snaps, r.up.kind, r.down.kind,
-                    path_code(r.up), path_code(r.down))
+                    path_code(r.up), path_code(r.down), pair)
 
 
 def path_code(path):
@@ -109,20 +124,22 @@ def path_code(path):
 
 @critical_angles.defjvp
 def _critical_jvp(n, primals, tangents):
-    psi0, gap, s0 = primals
+    psi0, gap, s0, near = primals
     dtype = jnp.result_type(float)
-    p = jnp.stack([jnp.asarray(v, dtype) for v in primals])
-    dp = jnp.stack([jnp.asarray(v, dtype) for v in tangents])
-    r = jr.snap_angles(design_scene(psi0, gap, s0, n))
+    p = jnp.stack([jnp.asarray(v, dtype) for v in primals[:3]])
+    dp = jnp.stack([jnp.asarray(v, dtype) for v in tangents[:3]])
+    r, pair = _snap(psi0, gap, s0, n, near)
     out, douts = [], []
     for path in (r.up, r.down):
         g = critical_sensitivity(path.theta_before, path.force_before, path.alpha_c, p, path.kind, n)
         out.append(path.alpha_c)
         douts.append(jnp.where(path.snaps, jnp.dot(g, dp), 0.0))
     codes = (path_code(r.up), path_code(r.down))
-    prim = Critical(out[0], out[1], r.up.snaps, r.down.snaps, r.up.kind, r.down.kind, *codes)
+    prim = Critical(out[0], out[1], r.up.snaps, r.down.snaps, r.up.kind, r.down.kind, *codes, pair)
     zero = lambda a: jnp.zeros(jnp.shape(a), jax.dtypes.float0)  # noqa: E731
     codes = jax.tree.map(zero, codes)
+    # the neighbour's data for the next design carries no derivative
+    pair_dot = jax.tree.map(lambda a: jnp.zeros_like(a) if jnp.issubdtype(a.dtype, jnp.inexact) else zero(a), pair)
     tan = Critical(douts[0], douts[1], zero(r.up.snaps), zero(r.down.snaps), zero(r.up.kind), zero(r.down.kind),
-                   *codes)
+                   *codes, pair_dot)
     return prim, tan

@@ -217,8 +217,9 @@ class Context:
     """Lazily computed observables of one design (inside traced code): the critical angles
     and stable equilibria are computed once and shared by all terms."""
 
-    def __init__(self, psi0, gap, s0, n):
+    def __init__(self, psi0, gap, s0, n, near=None):
         self.psi0, self.gap, self.s0, self.n = psi0, gap, s0, n
+        self.near = near  # a neighbouring design's paths, to start the snap paths from
         self.scene = design_scene(psi0, gap, s0, n)
         self._critical = None
         self._eq = {}
@@ -233,7 +234,7 @@ class Context:
     @property
     def critical(self):
         if self._critical is None:
-            self._critical = critical_angles(self.psi0, self.gap, self.s0, self.n)
+            self._critical = critical_angles(self.psi0, self.gap, self.s0, self.n, self.near)
         return self._critical
 
     def equilibrium(self, state, alpha_deg):
@@ -273,7 +274,15 @@ def evaluate_terms(terms, psi0, gap, s0, n, numbers=None):
     or state it was computed from). `numbers`: the terms' (target, tol, weight) as a (k, 3)
     array (default `term_numbers(terms)`); the traced code reads them only from there, so
     problems that differ only in their targets share one compiled program."""
-    ctx = Context(psi0, gap, s0, n)
+    return evaluate_terms_near(terms, psi0, gap, s0, n, numbers)[:3]
+
+
+def evaluate_terms_near(terms, psi0, gap, s0, n, numbers=None, near=None):
+    """`evaluate_terms`, with the snap paths started from a neighbouring design's (`near`, a
+    `Critical.near`, or None), and what this design's paths leave for the next: returns
+    `(residuals, values, codes, near)` (`near` passed on unchanged where no term needs the
+    snap angles)."""
+    ctx = Context(psi0, gap, s0, n, near)
     numbers = term_numbers(terms) if numbers is None else numbers
     values = jnp.stack([t.value(ctx) for t in terms])
     codes = jnp.stack([t.code(ctx, values[i])._value.astype(jnp.int32) for i, t in enumerate(terms)])
@@ -285,7 +294,8 @@ def evaluate_terms(terms, psi0, gap, s0, n, numbers=None):
         if t.is_constraint:
             ok = ok & (values[i] == numbers[i, 0])
     res = jnp.where(ok, res, jnp.nan)
-    return res, values, codes
+    near_out = ctx._critical.near if ctx._critical is not None else near
+    return res, values, codes, near_out
 
 
 def energy_released(psi0, gap, s0, n=100, direction="up"):

@@ -11,6 +11,11 @@ implicit derivatives) come from one call per iteration.
   ($\lambda\leftarrow\lambda/3$), otherwise rejected ($\lambda\leftarrow 4\lambda$).
 * optax: `updates = opt.update(J^T r, state, z)`; every feasible iterate is taken.
 
+Each start's snap paths start from its previous iterate's critical points
+(`jaxrod.snap_angles(..., near=)`: Newton on the extended system, accepted only where its checks
+hold, the whole path walked elsewhere): the same iterates as walking every path, at about a third
+of the cost (benchmarks/results/warm.md). Across devices (`batch_size="devices"`) every path is walked.
+
 A start stops when it *reaches* the targets to `stop_fraction` of their tolerances, when
 $\|J^\top r\|_\infty <$ `gtol` (stationary: the target is not reachable from there), when
 $\lambda >10^{10}$ (no descent), or after `max_iter` iterations. A design whose residual
@@ -34,7 +39,7 @@ import numpy as np
 import jaxrod as jr
 from jaxrod.results import result_from_name, result_name
 
-from ._objectives import evaluate_terms, term_key, term_numbers
+from ._objectives import evaluate_terms, evaluate_terms_near, term_key, term_numbers
 from ._params import NAMES, Parametrization
 
 STATUS = ("running", "reached", "stationary", "no_descent", "max_iter", "infeasible_start")
@@ -79,25 +84,35 @@ class Problem(eqx.Module):
         psi0, gap, s0 = self.param.to_design(z)
         return evaluate_terms(self.terms, psi0, gap, s0, self.n, self.numbers)
 
-    def linearize(self, z):
-        """(r, J, values, codes) at z (codes: each term's `jaxrod.RESULTS` value)."""
+    def linearize(self, z, near=None):
+        """(r, J, values, codes) at z (codes: each term's `jaxrod.RESULTS` value). With `near`
+        (what the previous iterate's snap paths left, `design.Critical.near`; see
+        `jaxrod.snap_angles(..., near=)`), the snap paths start from that design's critical
+        points, and this design's are returned too: (r, J, values, codes, near)."""
         def f(zz):
-            r, v, c = self.residuals(zz)
-            return r, (r, v, c)
+            psi0, gap, s0 = self.param.to_design(zz)
+            r, v, c, nxt = evaluate_terms_near(self.terms, psi0, gap, s0, self.n, self.numbers, near)
+            return r, (r, v, c, nxt)
 
-        J, (r, v, c) = jax.jacfwd(f, has_aux=True)(z)
-        return r, J, v, c
+        J, (r, v, c, nxt) = jax.jacfwd(f, has_aux=True)(z)
+        return (r, J, v, c) if near is None else (r, J, v, c, nxt)
 
 
 @eqx.filter_jit
-def _linearize_batch(problem, z, batch_size=None):
+def _linearize_batch(problem, z, batch_size=None, near=None):
     """(r, J, values, codes) of every start: the one compiled call per iteration. `batch_size`
     None: one `vmap` over all starts; an int: `lax.map` over chunks of that many starts,
     each chunk `vmap`-ed (the same values; bounds the batch that XLA:CPU's batched LAPACK
-    kernels see, and the memory)."""
+    kernels see, and the memory). `near` (one per start, or None): see `Problem.linearize`;
+    with it the starts' new `near` is returned as a fifth output."""
+    if near is None:
+        if batch_size is None or batch_size >= z.shape[0]:
+            return jax.vmap(problem.linearize)(z)
+        return jax.lax.map(problem.linearize, z, batch_size=batch_size)
+    one = lambda a: problem.linearize(*a)  # noqa: E731
     if batch_size is None or batch_size >= z.shape[0]:
-        return jax.vmap(problem.linearize)(z)
-    return jax.lax.map(problem.linearize, z, batch_size=batch_size)
+        return jax.vmap(one)((z, near))
+    return jax.lax.map(one, (z, near), batch_size=batch_size)
 
 
 @functools.lru_cache(maxsize=8)
@@ -115,10 +130,22 @@ def _linearize_sharded(problem, z):
     return out
 
 
-def _linearize(problem, z, batch_size):
+def _linearize(problem, z, batch_size, near=None):
+    """`_linearize_batch` (with `near`: also the starts' new `near`), or split across devices
+    (which does not warm-start: `near` is passed on unchanged)."""
     if batch_size == "devices":
-        return _linearize_sharded(problem, z)
-    return _linearize_batch(problem, z, batch_size)
+        out = _linearize_sharded(problem, z)
+        return out if near is None else (*out, near)
+    return _linearize_batch(problem, z, batch_size, near)
+
+
+def _first_near(problem, B):
+    """One unusable `near` per start: the first iterate walks its paths (a problem whose terms
+    need no snap angle passes it on unchanged)."""
+    from jaxrod.branches._warm import unusable_near
+
+    one = unusable_near(problem.n, jnp.result_type(float))
+    return jax.tree.map(lambda x: jnp.broadcast_to(x, (B, 2) + x.shape), one)
 
 
 def auto_batch_size():
@@ -156,7 +183,11 @@ class _Loop:
         self.problem, self.opt = problem, optimizer
         self.frac, self.gtol, self.max_iter = stop_fraction, gtol, max_iter
         self.batch_size = batch_size
-        r, J, v, c = (np.asarray(a) for a in _linearize(problem, z0, batch_size))
+        # each start's snap paths start from its previous iterate's (`jaxrod.snap_angles(..., near=)`)
+        near = _first_near(problem, z0.shape[0])
+        out = _linearize(problem, z0, batch_size, near)
+        r, J, v, c = (np.asarray(a) for a in out[:4])
+        self.near = None if near is None else jax.tree.map(np.asarray, out[4])
         self.z, self.r, self.J, self.values, self.codes = np.asarray(z0), r, J, v, c
         self.loss = _loss(r)
         B = z0.shape[0]
@@ -185,7 +216,8 @@ class _Loop:
             dz = np.asarray(dz)
         running = self.status == 0
         z_new = self.z + np.where(running[:, None], dz, 0.0)
-        r, J, v, c = (np.asarray(a) for a in _linearize(self.problem, jnp.asarray(z_new), self.batch_size))
+        out = _linearize(self.problem, jnp.asarray(z_new), self.batch_size, self.near)
+        r, J, v, c = (np.asarray(a) for a in out[:4])
         loss = _loss(r)
         # LM accepts descent only; optax follows its own trajectory, refusing infeasible iterates
         accept = running & ((loss < self.loss) if self.opt is None else np.isfinite(loss))
@@ -197,6 +229,10 @@ class _Loop:
         self.values = np.where(a1, v, self.values)
         self.codes = np.where(a1, c, self.codes)
         self.loss = np.where(accept, loss, self.loss)
+        if self.near is not None:
+            self.near = jax.tree.map(
+                lambda n, o: np.where(np.reshape(accept, (-1,) + (1,) * (np.ndim(n) - 1)), n, o),
+                jax.tree.map(np.asarray, out[4]), self.near)
         if opt_state is not None:
             self.opt_state = jax.tree.map(
                 lambda n, o: jnp.where(jnp.reshape(jnp.asarray(running), (-1,) + (1,) * (n.ndim - 1)), n, o),

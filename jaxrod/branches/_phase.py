@@ -71,7 +71,7 @@ from ..statics import initial_state_signed
 from .._misc import check_grid, fold_widths, package_version, jit
 from ..model import Clamps, Contact, crease_layout, layout_strip, Mesh, Scene
 from ._snap import _snap_angles_from
-from ._warm import near_of, unusable_near
+from ._warm import near_pair, unusable_near
 from ..results import RESULTS
 from ..sweeps import agree, MODES, ShardedMap
 
@@ -156,7 +156,7 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), con
         if keep_branch:
             for name, p in (("up", r.up), ("down", r.down)):
                 out[f"branch_{name}"] = jax.tree.map(lambda x: x[0], p.branch)
-        near = jax.tree.map(lambda d, u: jnp.stack([d, u]), near_of(r.down), near_of(r.up))
+        near = near_pair(r)
         return (starts.theta, starts.force, starts.result == RESULTS.successful, near), out
 
     first = unusable_near(N, dtype)

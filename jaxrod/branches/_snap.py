@@ -48,7 +48,7 @@ from .._misc import check_bool, check_int, check_number, run_if, jit
 from ..results import RESULTS
 from ..statics import Equilibrium
 from ..statics import mode_parity
-from ._warm import near_of, start_branch, warm_critical
+from ._warm import Near, near_pair, start_branch, warm_critical
 from ._landing import JUMP_DISTANCE, LANDING_TRIES, _fh, _is_mirror_symmetric, _land  # noqa: F401
 
 
@@ -432,7 +432,8 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     [`jaxrod.snap_angles_extrapolated`][] (Richardson from $N$ and $2N$, ~1e-5 deg).
 
     `near`: the `SnapAngles` of a neighbouring scene (the previous design of an optimizer,
-    the previous gap of a sweep; same mesh). Each path then starts from the neighbour's
+    the previous gap of a sweep; same mesh), or the few kB of it that
+    `jaxrod.branches._warm.near_pair` keeps. Each path then starts from the neighbour's
     critical point, by Newton's method on the extended system, and is accepted only where
     it passes the checks of `jaxrod.branches._warm` (an equilibrium at the edge of a stable
     region, reached from its stable side, a stable landing, no crossing); elsewhere the whole
@@ -460,13 +461,15 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     if near is None:
         starts = lax.map(lambda sg: initial_state_signed(scene, sg), signs)
     else:
-        if not isinstance(near, SnapAngles):
+        if isinstance(near, Near):  # what `near_pair` kept of a neighbour: (down, up) stacked
+            shape, near_paths = near.theta.shape[-1:], lax.stop_gradient(near)
+        elif isinstance(near, SnapAngles):
+            shape, near_paths = near.up.theta_before.shape, lax.stop_gradient(near_pair(near))
+        else:
             raise ValueError(f"near must be the jaxrod.SnapAngles of a neighbouring scene or None, got {near!r}")
-        if near.up.theta_before.shape != (scene.mesh.n,):
+        if shape != (scene.mesh.n,):
             raise ValueError(f"near must come from a scene with the same mesh (n = {scene.mesh.n}), "
-                             f"got states of shape {near.up.theta_before.shape}")
-        near_paths = lax.stop_gradient(jax.tree.map(lambda d, u: jnp.stack([d, u]), near_of(near.down),
-                                                    near_of(near.up)))
+                             f"got states of shape {shape}")
         # the up state starts the down path (index 0 of `near_paths`), the down state the up path:
         # each by Newton from the neighbour's start state, the homotopy where that fails
         warm = (near_paths.start_theta, near_paths.start_force, near_paths.start_ok)

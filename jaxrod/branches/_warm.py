@@ -91,6 +91,12 @@ def near_of(path) -> Near:
                 start_ok)
 
 
+def near_pair(r) -> Near:
+    """The (down, up) [`Near`][]s of a `SnapAngles`, stacked on a leading axis: all that
+    `snap_angles(..., near=)` reads of a neighbour (a few kB instead of its walked branches)."""
+    return jax.tree.map(lambda d, u: jnp.stack([d, u]), near_of(r.down), near_of(r.up))
+
+
 def unusable_near(n, dtype) -> Near:
     """A [`Near`][] that starts nothing (the first member of a sweep)."""
     z = jnp.zeros((), dtype)
