@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 
 import jaxrod as jr
-from jaxrod.branches._warm import near_pair
+from jaxrod.branches import near_pair
 from jaxrod.linalg import batched
 
 

@@ -142,7 +142,7 @@ def _linearize(problem, z, batch_size, near=None):
 def _first_near(problem, B):
     """One unusable `near` per start: the first iterate walks its paths (a problem whose terms
     need no snap angle passes it on unchanged)."""
-    from jaxrod.branches._warm import unusable_near
+    from jaxrod.branches import unusable_near
 
     one = unusable_near(problem.n, jnp.result_type(float))
     return jax.tree.map(lambda x: jnp.broadcast_to(x, (B, 2) + x.shape), one)

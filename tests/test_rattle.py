@@ -46,6 +46,7 @@ def test_links_and_ends_stay_exact(brink24):
     assert np.nanmax(np.where(np.isfinite(tr.constraint), tr.constraint, np.nan)) < 1e-10
 
 
+@pytest.mark.slow  # 8-15 s (three step sizes); CI checks RATTLE's energy over long times and v_s against a reference
 def test_energy_error_is_second_order(brink24):
     """Undamped, clamps held: the largest |E_k + V - E(0)| / V(0) over the snap falls 4x when
     the step halves (order 2; measured 1.06e-3 at the default step 1.83e-4 here, where the

@@ -48,3 +48,6 @@ from ._snap import SnapAngles as SnapAngles
 from ._snap import SnapPath as SnapPath
 from ._termination import termination_gap as termination_gap
 from ._termination import TerminationGap as TerminationGap
+from ._warm import Near as Near
+from ._warm import near_pair as near_pair
+from ._warm import unusable_near as unusable_near

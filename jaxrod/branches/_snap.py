@@ -433,7 +433,7 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
 
     `near`: the `SnapAngles` of a neighbouring scene (the previous design of an optimizer,
     the previous gap of a sweep; same mesh), or the few kB of it that
-    `jaxrod.branches._warm.near_pair` keeps. Each path then starts from the neighbour's
+    `jaxrod.branches.near_pair` keeps. Each path then starts from the neighbour's
     critical point, by Newton's method on the extended system, and is accepted only where
     it passes the checks of `jaxrod.branches._warm` (an equilibrium at the edge of a stable
     region, reached from its stable side, a stable landing, no crossing); elsewhere the whole
