@@ -438,7 +438,8 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     it passes the checks of `jaxrod.branches._warm` (an equilibrium at the edge of a stable
     region, reached from its stable side, a stable landing, no crossing); elsewhere the whole
     path is computed. An accepted path has `warm` True and no walked `branch`. Its angle is
-    the same critical point's to round-off (~1e-12 deg), at a quarter of the cost. Ignored
+    the same critical point's to round-off (~1e-12 deg), at about half the cost of the call
+    (benchmarks/results/warm.md). Ignored
     with self-contact and with `continue_after_snap`.
 
     `bound` must lie in $(0,\pi]$ (rad), `bisections` be a positive integer.

@@ -28,8 +28,8 @@ re-establish is the part of the path before it: that the branch from the start s
 this critical point without an earlier loss of stability rests on its continuity with the
 neighbour's path; the checks above reject the cases where a second instability is near.
 `tests/test_warm.py` checks warm chains against cold calls; benchmarks/results/warm.md measures
-the saving (a warm path costs about a quarter of a walked one: the landing and the start state
-remain). Scenes with self-contact always walk their branch."""
+the saving (a design whose two paths are warm costs about half a cold one: the landing and the
+start states remain). Scenes with self-contact always walk their branch."""
 
 from __future__ import annotations
 
