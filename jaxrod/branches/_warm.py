@@ -17,7 +17,7 @@ accepted only if every check a cold path would pass holds for it:
 - the path arrives from the stable side: at $\alpha_c-\mathrm{direction}\cdot10^{-6}$ a stable
   equilibrium lies within 0.05 rad ($L^2$) of the critical state (Newton with the inertia
   correction, started there). At a fold reached the other way (the return fold of an S-shaped
-  branch, or a branch point at which the symmetric branch regains stability) there is none;
+  branch, or a branch point at which the symmetric branch regains stability) there is none.
 
 Where any check fails the path's first stage walks its branch as a cold path does (one
 `run_if`, so a loop, a scan or a batch whose every member is accepted never runs it). Either
