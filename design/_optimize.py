@@ -13,8 +13,8 @@ implicit derivatives) come from one call per iteration.
 
 Each start's snap paths start from its previous iterate's critical points
 (`jaxrod.snap_angles(..., near=)`: Newton on the extended system, accepted only where its checks
-hold, the whole path walked elsewhere): the same iterates as walking every path, at about a third
-of the cost (benchmarks/results/warm.md). Across devices (`batch_size="devices"`) every path is walked.
+hold, the whole path walked elsewhere): the same iterates as walking every path, in less than half
+the time (benchmarks/results/warm.md). Across devices (`batch_size="devices"`) every path is walked.
 
 A start stops when it *reaches* the targets to `stop_fraction` of their tolerances, when
 $\|J^\top r\|_\infty <$ `gtol` (stationary: the target is not reachable from there), when
@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxrod as jr
+from jaxrod.branches import unusable_near
 from jaxrod.results import result_from_name, result_name
 
 from ._objectives import evaluate_terms, evaluate_terms_near, term_key, term_numbers
@@ -142,8 +143,6 @@ def _linearize(problem, z, batch_size, near=None):
 def _first_near(problem, B):
     """One unusable `near` per start: the first iterate walks its paths (a problem whose terms
     need no snap angle passes it on unchanged)."""
-    from jaxrod.branches import unusable_near
-
     one = unusable_near(problem.n, jnp.result_type(float))
     return jax.tree.map(lambda x: jnp.broadcast_to(x, (B, 2) + x.shape), one)
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import jaxrod as jr
-from jaxrod.branches._snap import JUMP_DISTANCE
+from jaxrod.branches._landing import JUMP_DISTANCE
 from jaxrod.energy import contact as C
 from helpers import np_crossings
 

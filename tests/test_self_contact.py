@@ -202,7 +202,7 @@ def test_landing_push_never_crosses():
     thin contact (0.005 L): the full push that turns the two halves of the strip against
     each other carries the legs through each other; `_land`, which picks the push's side by
     the fold height (both sides tried here), starts and ends clear of itself."""
-    from jaxrod.branches._snap import _land
+    from jaxrod.branches._landing import _land
     from jaxrod.branches._continuation import SymmetricAlpha
     from jaxrod.statics import Newton
 

@@ -41,7 +41,8 @@ from .._misc import check_int, check_number, run_if, jit
 from ._continuation import (STOP_FULL, STOP_STEP, STOP_UNSTABLE, Continuation, SymmetricAlpha, continue_branch,
                             require_float64)
 from ._critical import located_critical_point
-from ._snap import KIND_BRANCH_POINT, KIND_FOLD, KIND_NONE, SnapAngles, _fh, _is_mirror_symmetric, _refine, snap_angles
+from ._landing import _fh, _is_mirror_symmetric
+from ._snap import KIND_BRANCH_POINT, KIND_FOLD, KIND_NONE, SnapAngles, _refine, snap_angles
 
 
 class Route(eqx.Module):

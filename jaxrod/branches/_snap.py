@@ -39,7 +39,7 @@ from jaxtyping import Array
 from ..linalg import kkt
 from ._continuation import (STOP_BOUND, STOP_UNSTABLE, Continuation, SymmetricAlpha, _bordered_columns, _pieces,
                             _residual_norm, continue_branch, require_float64)
-from ..energy.contact import CONTACT_RESOLUTION, contact_energy, self_intersects, underresolved_contact
+from ..energy.contact import coarse_for_contact, contact_energy, self_intersects, underresolved_contact
 from ._critical import KIND_BRANCH_POINT, KIND_FOLD, KIND_NONE, located_critical_point
 from ..energy.geometry import discretize
 from ..statics import Newton, float_scene
@@ -49,7 +49,7 @@ from ..results import RESULTS
 from ..statics import Equilibrium
 from ..statics import mode_parity
 from ._warm import Near, near_pair, start_branch, warm_critical
-from ._landing import JUMP_DISTANCE, LANDING_TRIES, _fh, _is_mirror_symmetric, _land  # noqa: F401
+from ._landing import JUMP_DISTANCE, _fh, _is_mirror_symmetric, _land
 
 
 KIND_NAMES = {KIND_NONE: "none", KIND_FOLD: "fold", KIND_BRANCH_POINT: "branch_point"}
@@ -72,7 +72,8 @@ class SnapPath(eqx.Module):
     before it were supercritical branch points or contact clicks), `clicks` the number of
     contact clicks before it (always 0 without self-contact; see `follow_path`), `warm` whether the
     critical point was found from a neighbouring design's (`snap_angles(..., near=)`,
-    `jaxrod.branches._warm`; such a path walked no branch: `branch.count` is 0).
+    `jaxrod.branches._warm`; such a path walked no branch: its first stage holds only its start,
+    `branch.count` 1).
 
     `result` is the whole path's code: `successful`, or the start state's code where it does
     not exist, `continuation_incomplete`, `landing_failed`, `self_intersecting` (the
@@ -240,12 +241,12 @@ def _stage(scene, parameter, t0, m0, lam0, ok0, direction, settings, bound, bise
         branch, t, m, lam, v = walk(start)
         warm = jnp.zeros((), bool)
     else:
+        def attempt(n, o):
+            return warm_critical(scene, n, o, direction, parameter, bound, tol)
+
         args = (near, ok0 & use_near)
-        shapes = jax.eval_shape(lambda n, o: warm_critical(scene, n, o, direction, parameter, bound, tol), *args)
-        nothing = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes)
-        critical, warm, _ = run_if(ok0 & use_near & near.usable,
-                                   lambda n, o: warm_critical(scene, n, o, direction, parameter, bound, tol),
-                                   nothing, args)
+        nothing = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(attempt, *args))
+        critical, warm, _ = run_if(ok0 & use_near & near.usable, attempt, nothing, args)
         branch0 = start_branch(jax.eval_shape(walk, start)[0], t0, m0, lam0)
         branch, t, m, lam, v = run_if(~warm, walk, (branch0, *critical), (start,))
     snaps = (branch.stop == STOP_UNSTABLE) & ok0
@@ -363,7 +364,7 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
         coarse = jnp.zeros((), bool)
     else:
         touched = lax.map(lambda x: underresolved_contact(x, scene), jnp.stack([t, ta]))
-        clicked = (clicks > 0) & (jnp.max(discretize(scene).h) > CONTACT_RESOLUTION * scene.contact.thickness)
+        clicked = (clicks > 0) & coarse_for_contact(scene)
         coarse = touched[0] | (snaps & landed & touched[1]) | clicked
     result = RESULTS.where(
         ~ok0, start_eq.result,
@@ -434,10 +435,11 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     `near`: the `SnapAngles` of a neighbouring scene (the previous design of an optimizer,
     the previous gap of a sweep; same mesh), or the few kB of it that
     `jaxrod.branches.near_pair` keeps. Each path then starts from the neighbour's
-    critical point, by Newton's method on the extended system, and is accepted only where
-    it passes the checks of `jaxrod.branches._warm` (an equilibrium at the edge of a stable
-    region, reached from its stable side, a stable landing, no crossing); elsewhere the whole
-    path is computed. An accepted path has `warm` True and no walked `branch`. Its angle is
+    critical point, by Newton's method on the extended system, accepted only where it passes
+    the checks of `jaxrod.branches._warm` (an equilibrium at the edge of a stable region,
+    reached from its stable side); elsewhere the whole path is walked. Landing, codes and
+    self-intersection checks are a cold path's either way. An accepted path has `warm` True and
+    no walked `branch`. Its angle is
     the same critical point's to round-off (~1e-12 deg), at about half the cost of the call
     (benchmarks/results/warm.md). Ignored
     with self-contact and with `continue_after_snap`.

@@ -339,16 +339,25 @@ angles of Psi0 = 180 deg, G/L = 0.1 with the default `Contact` (thickness 0.01 L
 87.1, 86.4 and 87.1 deg at N = 24, 32, 48, 64 and 96 (h = 4.2, 3.1, 2.1, 1.6 and 1.0 thicknesses)."""
 
 
-def underresolved_contact(theta, scene, d=None):
-    """Whether the state `theta` is in self-contact (contact energy above zero) on a mesh whose
-    longest segment exceeds `CONTACT_RESOLUTION` contact thicknesses (the code
-    `contact_underresolved`). False without contact."""
+def coarse_for_contact(scene, d=None):
+    """Whether the mesh's longest segment exceeds `CONTACT_RESOLUTION` contact thicknesses
+    (False without contact)."""
     if scene.contact is None:
         return jnp.zeros((), bool)
     if d is None:
         d = discretize(scene)
-    coarse = jnp.max(d.h) > CONTACT_RESOLUTION * scene.contact.thickness
-    return coarse & (contact_energy(theta, scene, d) > 0)
+    return jnp.max(d.h) > CONTACT_RESOLUTION * scene.contact.thickness
+
+
+def underresolved_contact(theta, scene, d=None):
+    """Whether the state `theta` is in self-contact (contact energy above zero) on a mesh too
+    coarse for the contact thickness (`coarse_for_contact`; the code `contact_underresolved`).
+    False without contact."""
+    if scene.contact is None:
+        return jnp.zeros((), bool)
+    if d is None:
+        d = discretize(scene)
+    return coarse_for_contact(scene, d) & (contact_energy(theta, scene, d) > 0)
 
 
 def step_bound(theta, step, scene, d=None, margin=0.9):

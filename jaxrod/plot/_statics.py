@@ -243,14 +243,14 @@ def plot_hysteresis(h, path, title=None):
     return _save(fig, path)
 
 
-def _flagged(ds, direction, psi, values):
+def _flagged(ds, direction):
     """Where the `direction` path's angle is a number but its `result_{direction}` is not
-    `successful` (all False for a dataset without result codes)."""
+    `successful` (a boolean `DataArray` over `ds`'s grid; all False without result codes)."""
+    alpha = ds[f"alpha_c_{direction}"]
     name = f"result_{direction}"
     if name not in ds:
-        return np.zeros(values.shape, bool)
-    codes = np.asarray(ds[name].sel(psi0=psi).values)
-    return (codes != int(RESULTS.successful._value)) & np.isfinite(values)
+        return alpha.notnull() & alpha.isnull()
+    return alpha.notnull() & (ds[name] != int(RESULTS.successful._value))
 
 
 def phase_figure(ds, termination_gaps=None, title=None):
@@ -265,8 +265,8 @@ def phase_figure(ds, termination_gaps=None, title=None):
     psis = np.asarray(ds["psi0"].values, float)
     g = np.asarray(ds["gap"].values, float)
     first = None
-    any_flagged = any(bool(np.any(np.asarray(ds[f"result_{d}"].values) != 0)) for d in ("up", "down")
-                      if f"result_{d}" in ds)
+    flagged = {d: _flagged(ds, d) for d in ("up", "down")}
+    any_flagged = any(bool(f.any()) for f in flagged.values())
     for j, w in enumerate(widths):
         ax = fig.add_subplot(rows, cols, j + 1, sharey=first)
         if first is None:
@@ -283,8 +283,8 @@ def phase_figure(ds, termination_gaps=None, title=None):
             kd = np.asarray(sub["kind_down"].sel(psi0=psi).values)
             # a point whose path is not `successful` (it passes through itself, its outcome is
             # unknown, ...) is drawn apart, never as an ordinary marker on the curve
-            bad_up, bad_dn = _flagged(sub, "up", psi, up), _flagged(sub, "down", psi, dn)
-            any_flagged |= bool(bad_up.any() or bad_dn.any())
+            bad_up, bad_dn = (np.asarray((f if w is None else f.sel(s0=w)).sel(psi0=psi).values)
+                              for f in (flagged["up"], flagged["down"]))
             ax.plot(g, np.where(bad_up, np.nan, up), "o-", color=c, markersize=4, linewidth=1.2,
                     label=f"Ψ0 = {psi:g}°")
             ax.plot(g, np.where(bad_dn, np.nan, dn), "o--", color=c, markersize=4, markerfacecolor="white",
