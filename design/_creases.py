@@ -403,7 +403,9 @@ def crease_gap_for_speed(target_speed, creases, *, psi0_deg=180.0, s0=0.02, gap=
     `jaxrod.snap_speed` (RATTLE), from `gap`, each step kept inside `bounds` (halved towards
     the current gap when it leaves them) and, once gaps on both sides of the target are
     known, inside that bracket (a bisection where the Newton step leaves it: the fixed-step
-    snap's v_s wiggles on small scales, so its derivative can mislead near the root), until
+    snap's v_s wiggles on small scales, so its derivative can mislead near the root); a step to
+    a gap whose snap has no speed (its path or its run passes through itself, or it does not
+    snap) is halved back toward the last gap that had one; until
     $|v_s-v^\ast| \le 0.1\,$`tol`$\,v^\ast$ or
     `max_iter` steps; then re-checked by `jaxrod.snap_speed_run` on `n_check` segments.
     Needs float64."""
@@ -446,7 +448,13 @@ def crease_gap_for_speed(target_speed, creases, *, psi0_deg=180.0, s0=0.02, gap=
         v, dv = float(v), float(dv)
         history.append((float(g), v))
         if not math.isfinite(v):
-            break
+            # a gap whose snap has no speed (it passes through itself, or does not snap): back
+            # halfway toward the last gap that had one; none yet: give up
+            ran = [h[0] for h in history if math.isfinite(h[1])]
+            if not ran or len(history) > max_iter:
+                break
+            g = jnp.asarray(0.5 * (ran[-1] + float(g)))
+            continue
         if abs(v - target_speed) <= 0.1 * tol * target_speed:
             reached = True
             break

@@ -208,8 +208,8 @@ def test_brink_start_gradient_matches_central_differences():
     whose derivative is the extended system's; solving it again at alpha_c would attach the
     implicit derivative of a solve at a critical point, where the Hessian is singular (1.9 %
     off here). A fold, not a branch point: there the antisymmetric mode leaves
-    the fold height unchanged to first order, so the nudge's sign (either one gives the
-    mirror-image snap) is round-off's and a finite difference can straddle a flip."""
+    the fold height unchanged to first order, and the nudge's sign is the mirror convention's
+    (`test_branch_point_brink_takes_the_mirror_convention`)."""
     w = jnp.sin(jnp.arange(N) + 1.0)
     sc = lambda p: jr.make_scene(p, 0.5, 0, n=N)  # noqa: E731
     assert int(jr.snap_angles(sc(60.0)).down.kind) == 1  # fold
@@ -222,6 +222,29 @@ def test_brink_start_gradient_matches_central_differences():
     h = 1e-3
     fd = (f(60.0 + h) - f(60.0 - h)) / (2 * h)
     assert abs(float(g) - float(fd)) < 1e-7 * abs(float(fd)), (float(g), float(fd))
+
+
+def test_branch_point_brink_takes_the_mirror_convention(snap30):
+    """At a branch point the unstable mode is mirror-asymmetric and moves the fold height only to
+    second order: the brink's image is the mirror convention's (mean angle of the nudge
+    negative), whichever sign the mode comes with, not round-off's; at a fold the nudge moves
+    the fold height the requested way."""
+    from jaxrod.dynamics._scenes import nudge_start
+    from jaxrod.energy.geometry import mode_sign
+
+    sc, snap = snap30
+    assert int(snap.up.kind) == 2  # a branch point
+    start = jr.brink(sc, "up", snap=snap)
+    t, v = snap.up.theta_before, snap.up.mode
+    a = nudge_start(t, v, start.scene, 1.0, 0.03)
+    b = nudge_start(t, -v, start.scene, -1.0, 0.03)
+    np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(a), np.asarray(start.theta0), rtol=0, atol=1e-12)
+    h = discretize(sc).h
+    assert float(jnp.sum(h * (a - t))) < 0
+    # a first-order effect decides where there is one, the mean angle where it is round-off
+    assert float(mode_sign(0.3, h, v)) == 1.0 and float(mode_sign(-0.3, h, v)) == -1.0
+    assert float(mode_sign(1e-17, h, v)) == float(mode_sign(-1e-17, h, v)) == -float(mode_sign(1e-17, h, -v))
 
 
 def test_brink_from_a_snap_without_polish():

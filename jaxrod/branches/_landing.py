@@ -8,6 +8,7 @@ import jax.numpy as jnp
 from jax import lax
 
 from ..energy.contact import step_bound
+from ..energy.geometry import discretize, mode_sign
 from ..energy.lagrangian import positions
 from ..linalg import kkt
 from ..results import RESULTS
@@ -58,7 +59,9 @@ def _land(scene, parameter, t, m, lam, v, direction, up_expected, solver):
     def relax(t0, m0, u, e):
         plus = _fh(scene, parameter, t0 + e * u, m0, lam)
         minus = _fh(scene, parameter, t0 - e * u, m0, lam)
-        pick = jnp.where((plus > minus) == up_expected, 1.0, -1.0)
+        # the push that moves the fold height the expected way; mirror images (equal heights, a
+        # branch point's asymmetric mode) by the mirror convention, not by round-off
+        pick = mode_sign(jnp.where(up_expected, 1.0, -1.0) * (plus - minus), discretize(scene).h, u)
         push = pick * e * u
         if scene.contact is not None:
             # the push itself may not carry two parts of the strip through each other (as no Newton

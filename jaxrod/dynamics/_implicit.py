@@ -246,7 +246,9 @@ class HHT(eqx.Module):
       chain: the module docstring).
     - `tol`: the local error allowed per step, as the nodes' position error over $L$
       (default 3e-6; on the brink snap of Psi0 = 30 deg, G/L = 0.5 its $v_s$ error is 2e-4,
-      1e-3 and 3e-3 at N = 50, 100 and 200, growing with N: benchmarks/results/implicit.md).
+      1e-3 and 3e-3 at N = 50, 100 and 200, growing with N: benchmarks/results/implicit.md;
+      on the mirror image of that brink 1e-3 at N = 50, where the adaptive step's accept and
+      reject decisions differ by round-off).
     - `newton_iters`: Newton iterations per step (default 8); a step that has not converged
       after them is retried shorter.
     - `newton_tol`: Newton's stop: the residual scaled by the diagonal of its matrix and the

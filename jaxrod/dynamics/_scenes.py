@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 
 from ._equations import Protocol, check_run_settings
-from ..energy.geometry import discretize
+from ..energy.geometry import discretize, mode_sign
 from ..statics import initial_state
 from ..linalg.batched import solve2
 from .._misc import check_param, dynamics_jit, with_program_beside
@@ -50,13 +50,15 @@ The snap speed moves by about 1e-3 relative between small nudges (measured in
 def nudge_start(theta_c, mode, scene, direction, nudge):
     r"""The brink's start $\Pi(\theta_c+\epsilon\hat v)$: `theta_c` plus `nudge` $\epsilon$ (rad,
     RMS) times the unstable `mode` scaled to unit RMS norm $\sum_ih_i\hat v_i^2=L$, signed so
-    that the fold height moves in `direction` (+1 up, -1 down) to first order, projected
+    that the fold height moves in `direction` (+1 up, -1 down) to first order (a
+    mirror-asymmetric mode, which moves it only to second order, by the mirror convention of
+    `jaxrod.energy.geometry.mode_sign`), projected
     ($\Pi$) onto the end condition of `scene` (which holds the clamps of the run)."""
     d = discretize(scene)
     k = scene.mesh.n // 2
     v = mode / jnp.sqrt(jnp.sum(d.h * mode**2) / jnp.sum(d.h))
     dy = jnp.sum((d.h * jnp.cos(theta_c) * v)[:k])  # first-order change of the fold height
-    v = v * jnp.where(direction * jax.lax.stop_gradient(dy) >= 0, 1.0, -1.0)
+    v = v * jax.lax.stop_gradient(mode_sign(direction * dy, d.h, v))
     return project(theta_c + nudge * v, scene)
 
 

@@ -59,3 +59,22 @@ def at_arclength(values, s, where):
     w = (where - s[i]) / (s[i + 1] - s[i])
     w = w.reshape(w.shape + (1,) * (values.ndim - 1))
     return (1.0 - w) * values[i] + w * values[i + 1]
+
+
+MIRROR_TIE = 1e-10
+"""Relative size below which a mode's first-order effect counts as zero in [`mode_sign`][]."""
+
+
+def mode_sign(effect, h, v):
+    r"""The sign (+1.0 or -1.0) to give the mode `v` (segment angles, with segment lengths `h`)
+    so that `effect`, the first-order change the mode makes in some observable (a fold height's
+    $\sum_{i<N/2}h_i\cos\theta_i\,v_i$, or a difference of fold heights), is non-negative.
+
+    Where `effect` vanishes to round-off, $|{\rm effect}|\le 10^{-10}\sum_ih_i|v_i|$ (the
+    mirror-asymmetric mode of a branch point, whose two signs give the mirror images of one
+    motion), the sign is the mirror convention instead: the one that makes the mode's mean
+    angle $\sum_ih_iv_i$ negative. Round-off then never chooses the image: the same scene gives
+    the same one on every machine and every build."""
+    scale = jnp.sum(h * jnp.abs(v))
+    tie = jnp.abs(effect) <= MIRROR_TIE * scale
+    return jnp.where(tie, jnp.where(jnp.sum(h * v) <= 0, 1.0, -1.0), jnp.where(effect >= 0, 1.0, -1.0))
