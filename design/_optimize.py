@@ -360,7 +360,7 @@ def _f(x):
 class MultiStartResult(eqx.Module):
     """All starts of one run: `best` (a [`DesignResult`][]), the final `values` (B, 3),
     `losses` (B,), `reached` (B,), `status` (B,) codes into `STATUS`, `num_reached`;
-    `result` is the best design's [`DesignResult.result`][]."""
+    `result` is the best design's `DesignResult.result`."""
 
     best: DesignResult
     values: jax.Array

@@ -3,7 +3,7 @@
 import importlib
 import importlib.metadata
 import os
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING as _TYPE_CHECKING
 
 
 # jaxlib's CPU LAPACK kernels (the dense solves of the critical-point refinement, eigvalsh)
@@ -136,7 +136,7 @@ _DYNAMICS = (
     "Trajectory",
 )
 
-if TYPE_CHECKING:
+if _TYPE_CHECKING:
     from .dynamics import ACTUATOR_DAMPING as ACTUATOR_DAMPING
     from .dynamics import ACTUATOR_VISCOSITY as ACTUATOR_VISCOSITY
     from .dynamics import Actuation as Actuation

@@ -55,7 +55,7 @@ def speed_plane(psi0_deg, gaps, *, direction="up", s0=0.02, n=48, nudge=NUDGE, t
     `per_device`, `split` (the `mode`) and `on_batch` as in [`jaxrod.sweep`][];
     `creases`: crease positions (fractions of L) for a strip with a crease of fold angle
     $\Psi_0$ and width `s0` at each (no centred crease; the mesh places a node at each),
-    checked by [`jaxrod.model.crease_layout`][] for every $\Psi_0$ of the grid.
+    checked by `jaxrod.model.crease_layout` for every $\Psi_0$ of the grid.
 
     **Returns:** `v_s` (in $v^\ast$; NaN where the point does not snap or its run failed a
     check), `v_s_raw`, `alpha_c_deg`, `kind` (1 fold, 2 branch point), `t_peak`,

@@ -2,7 +2,7 @@ r"""A resumable sweep: one function over a list (or grid) of points, on every de
 
 `sweep(fn, points)` evaluates `fn(member, shared)` at every point (a member is one value of
 each named parameter) in batches of `devices x per_device` members through
-[`ShardedMap`][jaxrod.sweeps.ShardedMap] and returns an `xarray.Dataset` with dimension
+[`ShardedMap`][jaxrod.ShardedMap] and returns an `xarray.Dataset` with dimension
 `point`, the parameters as coordinates, one variable per output of `fn` (integer result
 codes included, as `fn` returns them) and `device`, the id of the device that computed each
 point (`-1` for points read back from an earlier run).
@@ -158,7 +158,7 @@ def sweep(fn, points, *, shared=None, out=None, name="sweep", attrs=None, dims=N
       dataset's file name; `attrs` a dict of settings stored with it (part of the
       fingerprint: give every setting `fn` closes over, such as the mesh size).
     - `dims`: dict output name -> names of its axes beyond `point` (default `<name>_<k>`).
-    - `devices`, `per_device`, `mode`: as [`ShardedMap`][jaxrod.sweeps.ShardedMap]. `fn` may
+    - `devices`, `per_device`, `mode`: as [`ShardedMap`][jaxrod.ShardedMap]. `fn` may
       itself be a `ShardedMap` (then these three are its own): repeated sweeps of one
       function then reuse its compiled program instead of tracing and compiling a new one.
     - `progress`: a tqdm bar over points (process 0); `on_batch(indices)` is called after each
