@@ -40,6 +40,8 @@ _LINKS = (("](../benchmarks/", "](bench/"), ("](../notebooks/", "](examples/"))
 
 
 def on_page_markdown(markdown, page, config, files, **kwargs):
+    if CLI_MARKER in markdown:
+        markdown = markdown.replace(CLI_MARKER, cli_reference())
     depth = page.file.src_uri.count("/")
     for old, new in _LINKS:
         markdown = markdown.replace(old, "](" + "../" * depth + new[2:])
@@ -66,3 +68,29 @@ def on_startup(command, dirty, **kwargs):
         if entry.name != "__pycache__":
             (pkg / entry.name).symlink_to(entry)
     (pkg / "design").symlink_to(repo / "design")
+
+
+CLI_MARKER = "<!-- cli-reference -->"
+"""Where [`on_page_markdown`][] writes every subcommand's `--help` into the command-line page."""
+
+
+def cli_reference() -> str:
+    """Markdown of `jaxrod --help` and every subcommand's `--help`, as the parser prints them."""
+    import os
+
+    from jaxrod.cli._main import _build_parser
+
+    old = os.environ.get("COLUMNS")
+    os.environ["COLUMNS"] = "100"  # argparse wraps to the terminal's width
+    try:
+        parser = _build_parser()
+        sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+        parts = ["### jaxrod", "", "```text", parser.format_help().rstrip(), "```", ""]
+        for name, p in sub.choices.items():
+            parts += [f"### jaxrod {name}", "", "```text", p.format_help().rstrip(), "```", ""]
+    finally:
+        if old is None:
+            os.environ.pop("COLUMNS", None)
+        else:
+            os.environ["COLUMNS"] = old
+    return "\n".join(parts)

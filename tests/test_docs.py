@@ -6,6 +6,8 @@ import re
 import subprocess
 import sys
 import types
+
+import pytest
 from pathlib import Path
 
 import jaxrod
@@ -60,3 +62,29 @@ def test_site_builds_strictly(tmp_path):
         assert (site / page).is_file(), page
     html = (site / "api" / "branches" / "index.html").read_text()
     assert 'id="jaxrod.snap_angles"' in html and "arithmatex" in html
+    # the command line page carries every subcommand's help
+    from jaxrod.cli._main import _build_parser
+
+    sub = next(a for a in _build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")
+    cli = (site / "cli" / "index.html").read_text()
+    for name in sub.choices:
+        assert f'id="jaxrod-{name}"' in cli, name
+
+
+@pytest.mark.slow  # a browser (~30 s); needs Debian's chromium: apt-get install chromium
+def test_site_in_a_browser(tmp_path):
+    """docs/check_site.py: the home page, an API page and an example page load in headless
+    Chromium with no JavaScript error, failed request or broken image; screenshots written."""
+    sys.path.insert(0, str(ROOT / "docs"))
+    try:
+        import check_site
+    finally:
+        sys.path.pop(0)
+    assert check_site._browser() is not None, "the browser check needs Debian's chromium: apt-get install chromium"
+    site = tmp_path / "site"
+    check_site.build(site)
+    problems = check_site.check(site, tmp_path / "shots")
+    assert problems == [], problems
+    for page in check_site.PAGES:
+        shot = tmp_path / "shots" / (page.replace("/", "_").replace(".html", "") + ".png")
+        assert shot.stat().st_size > 10_000, shot
