@@ -86,8 +86,8 @@ def loglog_slope(x, y):
 
 
 def run_notebook(name, timeout=600, extra_cells=()):
-    """Execute notebooks/NAME in quick mode (JAXROD_QUICK=1) with nbclient; returns the
-    executed notebook. Checks it was committed without outputs. `extra_cells`: sources of
+    """Execute notebooks/NAME in quick mode (JAXROD_QUICK=1) with nbclient, its committed
+    outputs dropped first; returns the executed notebook. `extra_cells`: sources of
     code cells appended to the executed copy (the committed notebook is untouched), to
     report what the kernel holds at the end (figures, variables) for the test to read."""
     import os
@@ -98,7 +98,9 @@ def run_notebook(name, timeout=600, extra_cells=()):
 
     nb_dir = Path(__file__).resolve().parent.parent / "notebooks"
     nb = nbformat.read(nb_dir / name, as_version=4)
-    assert all(c.get("outputs", []) == [] for c in nb.cells if c.cell_type == "code"), "commit without outputs"
+    for c in nb.cells:
+        if c.cell_type == "code":
+            c.outputs, c.execution_count = [], None
     nb.cells += [nbformat.v4.new_code_cell(src) for src in extra_cells]
     old = os.environ.get("JAXROD_QUICK")
     os.environ["JAXROD_QUICK"] = "1"

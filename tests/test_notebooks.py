@@ -1,5 +1,5 @@
-"""Every notebook is committed without outputs; each notebook is executed in quick mode by its
-own test file (tests/test_notebook_*.py)."""
+"""Every notebook is committed executed, with its outputs; each notebook is executed again in
+quick mode by its own test file (tests/test_notebook_*.py)."""
 
 from pathlib import Path
 
@@ -16,12 +16,20 @@ def test_every_notebook_has_its_test():
         assert (here / f"test_notebook_{path.stem}.py").exists(), path.name
 
 
-def test_notebooks_committed_without_outputs():
+def test_notebooks_committed_executed():
+    """Committed with their outputs (so that the repository's page and the documentation site
+    show their figures): every code cell executed, in order, in one run, none with an error,
+    and at least one figure (`python notebooks/execute.py` writes them)."""
     for path in sorted(NB.glob("*.ipynb")):
         nb = nbformat.read(path, as_version=4)
-        for c in nb.cells:
-            if c.cell_type == "code":
-                assert c.get("outputs", []) == [] and c.get("execution_count") is None, path.name
+        code = [c for c in nb.cells if c.cell_type == "code" and c.source.strip()]
+        counts = [c.get("execution_count") for c in code]
+        assert counts == list(range(1, len(code) + 1)), (path.name, counts)
+        for c in code:
+            for o in c.get("outputs", []):
+                assert o.output_type != "error", (path.name, o.get("ename"))
+        images = [o for c in code for o in c.get("outputs", []) if "image/png" in o.get("data", {})]
+        assert images, path.name
 
 
 def test_output_readers():
