@@ -54,9 +54,10 @@ whereas a single top-level `jr.snap_angles` call compiles with jaxrod's
 `COMPILER_OPTIONS` (two of XLA's while-loop passes off). `--jaxrod-options` adds, per B, the
 same batch compiled with those options (`lowered.compile(compiler_options())`).
 
-A vmapped `lax.while_loop` runs until its slowest member is done, every member doing the work
-of every iteration, so the per-member time of a batch is set by its hardest member (snap
-angles: the longest continuation); on a CPU a batch does not use more cores than one call.
+On a CPU `jax.vmap(jr.snap_angles)` runs its members one after another through the single
+call's program (`jaxrod._lanes.in_turn`): the batch saves the loop's dispatch, not arithmetic,
+and uses no more cores than one call. On an accelerator it is one vectorized program, whose
+solver loops run a lane per member.
 """
 
 from __future__ import annotations
@@ -552,9 +553,9 @@ COLUMNS_NOTE = [
     "`memory_analysis()` temp + argument + output bytes; peak RSS = the process's high-water mark "
     "(`resource.getrusage`) right after the batch ran (it includes everything run before).",
     "",
-    "A vmapped `lax.while_loop` runs until its slowest member is done, every member doing the work of each "
-    "iteration, so a batch's per-member time is set by its hardest member (snap angles: the longest "
-    "continuation); on a CPU the batch uses no more cores than a single call.",
+    "On a CPU `jax.vmap(jr.snap_angles)` runs its members one after another through the single call's "
+    "program (`jaxrod._lanes.in_turn`): the batch saves the loop's dispatch, not arithmetic, and uses no more "
+    "cores than one call; on an accelerator it is one vectorized program with a lane per member.",
 ]
 
 

@@ -29,6 +29,11 @@ tridiagonal solves run member by member and a pass is bound by its count of smal
 operations), while more lanes leave more of the batch waiting at its tail: few lanes are best
 there (benchmarks/results/batch_cpu.md). An accelerator needs wide batches: every member gets
 a lane of its own.
+
+A whole search made of such machines (`jaxrod.snap_angles`: start states, continuation,
+bisection, landing) is wrapped by [`in_turn`][]: on a CPU its batch runs the members one after
+another through the single program, which measured faster than any vectorized form there;
+elsewhere it is one vectorized program whose machines run on lanes.
 """
 
 from __future__ import annotations
@@ -142,6 +147,43 @@ def machine_vmap(init, step, done, finish):
             out = jax.vmap(lambda one: run_machine(init, step, done, finish, one))(xs)
         else:
             out = run_lanes(init, step, done, finish, xs, lanes)
+        return out, jax.tree.map(lambda _: True, out)
+
+    return fun
+
+
+IN_TURN = ("cpu",)
+"""Platforms (`jax.default_backend()`) on which [`in_turn`][] runs a batch's members one after
+another."""
+
+
+def in_turn(fn):
+    r"""`fn` (a function of one pytree of arrays), whose `jax.vmap` runs the members one after
+    another (`lax.map` of the unbatched program) on the platforms of `IN_TURN`, and as one
+    vectorized program elsewhere.
+
+    For a search made of nested solver loops (a snap path: start states, continuation,
+    bisection, landing) a vectorized batch on a CPU buys little per member (a corrector pass at
+    N = 100 costs about 45 us alone and 31 us per member in a batch of 128: the CPU runs the
+    batched arithmetic at about the same rate) and pays for every masked-out iteration, every
+    `cond` whose branches both run and every loop that runs to its slowest member; a loop of
+    the single program pays for none of them, needs one member's memory and compiles the single
+    program. Every member is then its single call exactly. Nested `vmap`s loop over every axis.
+    Differentiable where `fn`'s result does not depend on its input through the loop (as
+    [`machine_vmap`][])."""
+
+    @custom_vmap
+    def fun(x):
+        return fn(x)
+
+    @fun.def_vmap
+    def rule(axis_size, in_batched, x):
+        (batched,) = in_batched
+        xs = jax.tree.map(lambda a, b: a if b else jnp.broadcast_to(a, (axis_size,) + jnp.shape(a)), x, batched)
+        if jax.default_backend() in IN_TURN:
+            out = lax.map(fun, xs)
+        else:
+            out = jax.vmap(fn)(xs)
         return out, jax.tree.map(lambda _: True, out)
 
     return fun

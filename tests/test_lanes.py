@@ -98,3 +98,23 @@ def test_batch_of_one():
     v1, k1 = _alone()[2]
     assert v.shape == (1,) and int(k[0]) == int(k1)
     np.testing.assert_array_equal(np.asarray(v[0]), v1)
+
+
+def _newton(x):
+    return _lanes.run_machine(_init, _step, _done, _finish, x)
+
+
+@pytest.mark.parametrize("platforms", [("cpu",), ()])
+def test_in_turn_members_equal_their_own_runs(monkeypatch, platforms):
+    """`in_turn`: under `jax.vmap` (one axis, two nested axes, an unbatched argument) every
+    member equals its own run to the bit, whether the platform runs members one after another
+    (`IN_TURN` holds it) or vectorized; a NaN member stays its own."""
+    monkeypatch.setattr(_lanes, "IN_TURN", platforms)
+    f = _lanes.in_turn(lambda x: _newton((x[0] * x[1],)))
+    a = jnp.asarray([2.0, 1e-3, jnp.nan, 7e5, 3.0, 0.5])
+    one = [f((ai, jnp.asarray(1.0))) for ai in a]
+    got = jax.jit(jax.vmap(f, in_axes=((0, None),)))((a, jnp.asarray(1.0)))
+    for k, (v, n) in enumerate(one):
+        assert np.array_equal(np.asarray(got[0][k]), np.asarray(v), equal_nan=True) and int(got[1][k]) == int(n)
+    nested = jax.jit(jax.vmap(jax.vmap(f)))((a.reshape(2, 3), jnp.ones((2, 3))))
+    np.testing.assert_array_equal(np.asarray(nested[0]).ravel(), np.asarray(got[0]))

@@ -44,6 +44,7 @@ from ._critical import KIND_BRANCH_POINT, KIND_FOLD, KIND_NONE, located_critical
 from ..energy.geometry import discretize
 from ..statics import Newton, float_scene
 from ..statics import initial_state_signed
+from .._lanes import in_turn
 from .._misc import check_bool, check_int, check_number, run_if, jit
 from ..results import RESULTS
 from ..statics import Equilibrium
@@ -459,11 +460,8 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     # both start states through one traced body (index 0 up, 1 down), one after the other:
     # `lax.map`, not `vmap`, which would batch the LAPACK kernels inside the Newton loops
     # (see `_phase.py` for the XLA:CPU deadlock that batching caused)
-    signs = jnp.array([1.0, -1.0], scene.strip.psi0.dtype)
     near_paths = None
-    if near is None:
-        starts = lax.map(lambda sg: initial_state_signed(scene, sg), signs)
-    else:
+    if near is not None:
         if isinstance(near, Near):  # what `near_pair` kept of a neighbour: (down, up) stacked
             shape, near_paths = near.theta.shape[-1:], lax.stop_gradient(near)
         elif isinstance(near, SnapAngles):
@@ -473,11 +471,33 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
         if shape != (scene.mesh.n,):
             raise ValueError(f"near must come from a scene with the same mesh (n = {scene.mesh.n}), "
                              f"got states of shape {shape}")
-        # the up state starts the down path (index 0 of `near_paths`), the down state the up path:
-        # each by Newton from the neighbour's start state, the homotopy where that fails
-        warm = (near_paths.start_theta, near_paths.start_force, near_paths.start_ok)
-        starts = lax.map(lambda a: initial_state_signed(scene, a[0], warm=a[1:])[0], (signs, *warm))
-    return _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, continue_after_snap, near_paths)
+    arrays, static = eqx.partition(scene, eqx.is_array)
+
+    def search(x):
+        # the start states and both paths, without derivatives: under `jax.vmap` on a CPU the
+        # members run one after another (`jaxrod._lanes.in_turn`)
+        sc = eqx.combine(x[0], static)
+        signs = jnp.array([1.0, -1.0], sc.strip.psi0.dtype)
+        near_p = x[1]
+        if near_p is None:
+            starts = lax.map(lambda sg: initial_state_signed(sc, sg), signs)
+        else:
+            # the up state starts the down path (index 0 of `near_p`), the down state the up path:
+            # each by Newton from the neighbour's start state, the homotopy where that fails
+            warm = (near_p.start_theta, near_p.start_force, near_p.start_ok)
+            starts = lax.map(lambda a: initial_state_signed(sc, a[0], warm=a[1:])[0], (signs, *warm))
+        return _snap_angles_from(sc, starts, settings, bound, bisections, False, continue_after_snap, near_p)
+
+    raw = in_turn(search)((arrays, near_paths))
+    return _polish_both(scene_d, raw) if polish else raw
+
+
+def _polish_both(scene_d, r):
+    """[`_polish`][] of both paths of `r` (through one traced body, `lax.map` over the paths)."""
+    parameter = SymmetricAlpha()
+    paths = jax.tree.map(lambda a, b: jnp.stack([a, b]), r.down, r.up)
+    out = lax.map(lambda p: _polish(scene_d, p, parameter), paths)
+    return SnapAngles(up=jax.tree.map(lambda x: x[1], out), down=jax.tree.map(lambda x: x[0], out))
 
 
 def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, continue_after_snap=False, near_paths=None):
