@@ -11,8 +11,11 @@ exhausts its step budget. Each keeps its own code, each equals its single call
 call has NaN), and no member's numbers change with the company it keeps (the good members
 are the same, to 1e-9 deg, in a batch of good members only and in another order).
 
-The batch runs on 3 lanes (`jaxrod._lanes`: fewer lanes than members, so members finish and
-others take their lanes mid-run), as a batch larger than the default lanes would.
+On a CPU the batch runs its members one after another through the single program
+(`jaxrod._lanes.in_turn`), the user's default there. Nightly the same tests run the
+accelerators' form on the CPU: one vectorized program whose solver loops run on 3 lanes
+(`jaxrod._lanes`: fewer lanes than members, so members finish and others take their lanes
+mid-run), as a batch larger than the default lanes would.
 
 Four programs are compiled: the single call and the batch, each with the default settings
 and with the small step budget (~10 s and ~17 s each on 2 cores at XLA -O0); everything else
@@ -128,29 +131,35 @@ def assert_same_member(got, want, alpha_tol_deg, where):
 
 # ---------------------------------------------------------------------------- fixtures
 
-@pytest.fixture(scope="module", autouse=True)
-def three_lanes():
-    """Every batch of this module on 3 lanes (read when a batch is traced)."""
+@pytest.fixture(scope="module", autouse=True,
+                params=["in_turn", pytest.param("vectorized", marks=pytest.mark.slow)])
+def mode(request):
+    """The batch's form (read when a batch is traced): the platform's default (`in_turn` on a
+    CPU), or the accelerators' vectorized program with its loops on 3 lanes."""
     from jaxrod import _lanes
 
     key = jax.default_backend()
     saved = [(table, dict(table)) for table in (_lanes.LANES, _lanes.MIN_QUEUE)]
-    _lanes.LANES[key], _lanes.MIN_QUEUE[key] = 3, 0
-    yield
+    saved_turn = _lanes.IN_TURN
+    if request.param == "vectorized":
+        _lanes.LANES[key], _lanes.MIN_QUEUE[key] = 3, 0
+        _lanes.IN_TURN = ()
+    yield request.param
+    _lanes.IN_TURN = saved_turn
     for table, old in saved:
         table.clear()
         table.update(old)
 
 
 @pytest.fixture(scope="module")
-def batched():
+def batched(mode):
     """What users write: one `jax.jit` of `jax.vmap(jr.snap_angles)` (the default settings),
     compiled once for the batch size of `MEMBERS` and reused by every batch of that size."""
     return jax.jit(jax.vmap(jr.snap_angles))
 
 
 @pytest.fixture(scope="module")
-def scenes():
+def scenes(mode):
     return make_scenes(LABELS)
 
 
@@ -166,7 +175,7 @@ def singles():
 
 
 @pytest.fixture(scope="module")
-def budget():
+def budget(mode):
     """The small batch under `Continuation(max_points=BUDGET)` (its own program, the settings
     being static), the same batch with the exhausted member replaced by a copy of the first,
     and the members' single calls with the same settings."""
