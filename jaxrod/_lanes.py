@@ -123,6 +123,11 @@ def run_lanes(init, step, done, finish, xs, lanes: int):
     return lax.while_loop(cond, body, c0)[5]
 
 
+def _batched(axis_size, x, batched):
+    """The leaves of `x` with the batch axis in front: the unbatched ones broadcast to it."""
+    return jax.tree.map(lambda a, b: a if b else jnp.broadcast_to(a, (axis_size,) + jnp.shape(a)), x, batched)
+
+
 def machine_vmap(init, step, done, finish):
     """`x -> run_machine(init, step, done, finish, x)`, whose `jax.vmap` runs the members on
     lanes (`run_lanes` with `lanes_for(B)` lanes) instead of one loop to the slowest. The
@@ -141,7 +146,7 @@ def machine_vmap(init, step, done, finish):
             one = jax.tree.map(lambda a, b: a[0] if b else a, x, batched)
             out = jax.tree.map(lambda a: a[None], run_machine(init, step, done, finish, one))
             return out, jax.tree.map(lambda _: True, out)
-        xs = jax.tree.map(lambda a, b: a if b else jnp.broadcast_to(a, (axis_size,) + jnp.shape(a)), x, batched)
+        xs = _batched(axis_size, x, batched)
         lanes = lanes_for(axis_size)
         if lanes >= axis_size:  # a lane per member: one vectorized loop, no queue to keep
             out = jax.vmap(lambda one: run_machine(init, step, done, finish, one))(xs)
@@ -179,7 +184,7 @@ def in_turn(fn):
     @fun.def_vmap
     def rule(axis_size, in_batched, x):
         (batched,) = in_batched
-        xs = jax.tree.map(lambda a, b: a if b else jnp.broadcast_to(a, (axis_size,) + jnp.shape(a)), x, batched)
+        xs = _batched(axis_size, x, batched)
         if jax.default_backend() in IN_TURN:
             out = lax.map(fun, xs)
         else:

@@ -55,13 +55,14 @@ def _land(scene, parameter, t, m, lam, v, direction, up_expected, solver):
     sc = parameter.set(scene, lam + direction * 1e-3)
     eps = 0.05
     newton = Newton(max_steps=200 if scene.contact is None else 2000)
+    h = discretize(scene).h
 
     def relax(t0, m0, u, e):
         plus = _fh(scene, parameter, t0 + e * u, m0, lam)
         minus = _fh(scene, parameter, t0 - e * u, m0, lam)
         # the push that moves the fold height the expected way; mirror images (equal heights, a
         # branch point's asymmetric mode) by the mirror convention, not by round-off
-        pick = mode_sign(jnp.where(up_expected, 1.0, -1.0) * (plus - minus), discretize(scene).h, u)
+        pick = mode_sign(jnp.where(up_expected, 1.0, -1.0) * (plus - minus), h, u)
         push = pick * e * u
         if scene.contact is not None:
             # the push itself may not carry two parts of the strip through each other (as no Newton

@@ -141,7 +141,7 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), con
         starts = eqx.combine(eqs, static)
         # each path from the previous gap's critical point where that passes the checks of
         # `jaxrod.branches._warm` (the whole path elsewhere); not where the walks are kept
-        r = _snap_angles_from(scene, starts, settings, jnp.pi, 24, False, continue_after_snap=False,
+        r = _snap_angles_from(scene, starts, settings, jnp.pi, 24, continue_after_snap=False,
                               near_paths=None if keep_branch else near)
         out = {}
         for name, p in (("up", r.up), ("down", r.down)):

@@ -457,9 +457,6 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     scene_d = parameter.set(float_scene(scene), 0.0)  # carries gradients to the refinement
     scene = lax.stop_gradient(scene_d)
     require_float64(jnp.result_type(scene.strip.psi0), "snap_angles")
-    # both start states through one traced body (index 0 up, 1 down), one after the other:
-    # `lax.map`, not `vmap`, which would batch the LAPACK kernels inside the Newton loops
-    # (see `_phase.py` for the XLA:CPU deadlock that batching caused)
     near_paths = None
     if near is not None:
         if isinstance(near, Near):  # what `near_pair` kept of a neighbour: (down, up) stacked
@@ -477,6 +474,9 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
         # the start states and both paths, without derivatives: under `jax.vmap` on a CPU the
         # members run one after another (`jaxrod._lanes.in_turn`)
         sc = eqx.combine(x[0], static)
+        # both start states through one traced body (index 0 up, 1 down), one after the other:
+        # `lax.map`, not `vmap`, which would batch the LAPACK kernels inside the Newton loops
+        # (see `_phase.py` for the XLA:CPU deadlock that batching caused)
         signs = jnp.array([1.0, -1.0], sc.strip.psi0.dtype)
         near_p = x[1]
         if near_p is None:
@@ -486,7 +486,7 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
             # each by Newton from the neighbour's start state, the homotopy where that fails
             warm = (near_p.start_theta, near_p.start_force, near_p.start_ok)
             starts = lax.map(lambda a: initial_state_signed(sc, a[0], warm=a[1:])[0], (signs, *warm))
-        return _snap_angles_from(sc, starts, settings, bound, bisections, False, continue_after_snap, near_p)
+        return _snap_angles_from(sc, starts, settings, bound, bisections, continue_after_snap, near_p)
 
     raw = in_turn(search)((arrays, near_paths))
     return _polish_both(scene_d, raw) if polish else raw
@@ -500,13 +500,14 @@ def _polish_both(scene_d, r):
     return SnapAngles(up=jax.tree.map(lambda x: x[1], out), down=jax.tree.map(lambda x: x[0], out))
 
 
-def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, continue_after_snap=False, near_paths=None):
+def _snap_angles_from(scene, starts, settings, bound, bisections, continue_after_snap=False, near_paths=None):
     """`snap_angles` from given start states (`starts`: the up and down equilibria of the
     scene at alpha = 0 stacked on a leading axis, as `lax.map` of `initial_state_signed` makes
     them; a member whose `result` is not successful does not exist). `near_paths`: a
-    `jaxrod.branches._warm.Near` stacked (down, up) to start each path from, or None."""
+    `jaxrod.branches._warm.Near` stacked (down, up) to start each path from, or None. The
+    paths are not polished (`_polish_both`) and carry no derivative."""
     parameter = SymmetricAlpha()
-    scene = lax.stop_gradient(scene_d)
+    scene = lax.stop_gradient(scene)
     dtype = jnp.result_type(scene.strip.psi0)
     tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
     pick = lambda tree, i: jax.tree.map(lambda x: x[i], tree)  # noqa: E731
@@ -548,7 +549,7 @@ def _snap_angles_from(scene_d, starts, settings, bound, bisections, polish, cont
         end_ok = (last >= 0) & (path.start_result == RESULTS.successful)
         nxt = (br.lam[last], br.theta[last], br.force[last], end_ok, path.snaps, path.alpha_c, path.theta_after,
                path.force_after)
-        return nxt, (_polish(scene_d, path, parameter) if polish else path)
+        return nxt, path
 
     N = scene.mesh.n
     z = jnp.zeros((), dtype)
