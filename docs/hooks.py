@@ -1,57 +1,30 @@
 """MkDocs hooks of the documentation site (`mkdocs.yml`).
 
-MathJax is served from the site itself, not from a CDN, so that the site renders its
-equations offline and the browser check (`docs/check_site.py`) sees no failed request: its
-files come from the `django-static-mathjax` package (MathJax 3, no Django needed; the
-`docs` extra installs it) and are copied next to the built pages.
+* `on_startup`: lays out `jaxrod` for the API pages' static analysis (`SOURCE_TREE`).
+* `on_page_markdown`: writes every subcommand's `--help` into the command-line page
+  (`CLI_MARKER`) and points the pages' repository links at the site's folders (`_LINKS`).
+* `on_post_build`: MathJax is served from the site itself, not from a CDN, so that the site
+  renders its equations offline and the browser check (`docs/check_site.py`) sees no failed
+  request: its files come from the `django-static-mathjax` package (MathJax 3, no Django
+  needed; the `docs` extra installs it) and are copied next to the built pages.
 """
 
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 
+SOURCE_TREE = Path(__file__).resolve().parent.parent / "build" / "docs-src"
+"""Where `on_startup` lays out `jaxrod` for the API pages (`paths` in mkdocs.yml)."""
 
-def _mathjax_root() -> Path:
-    import importlib.util
-
-    spec = importlib.util.find_spec("mathjax")
-    if spec is None or not spec.submodule_search_locations:
-        raise RuntimeError("the docs need the django-static-mathjax package: pip install -e '.[docs]'")
-    root = Path(list(spec.submodule_search_locations)[0]) / "static" / "mathjax" / "es5"
-    if not (root / "tex-chtml.js").is_file():
-        raise RuntimeError(f"MathJax not found under {root}")
-    return root
-
-
-def on_post_build(config, **kwargs):
-    root = _mathjax_root()
-    out = Path(config["site_dir"]) / "mathjax"
-    out.mkdir(parents=True, exist_ok=True)
-    shutil.copy2(root / "tex-chtml.js", out / "tex-chtml.js")
-    fonts = Path("output") / "chtml" / "fonts" / "woff-v2"
-    shutil.copytree(root / fonts, out / fonts, dirs_exist_ok=True)
-
+CLI_MARKER = "<!-- cli-reference -->"
+"""Where `on_page_markdown` writes every subcommand's `--help` into the command-line page."""
 
 # Pages in docs/ link to the benchmark tables and the notebooks by their paths in the
 # repository (so that they resolve on the repository's web page too); on the site, those
 # folders are the symlinks docs/bench (../benchmarks) and docs/examples (../notebooks).
-_LINKS = (("](../benchmarks/", "](bench/"), ("](../notebooks/", "](examples/"))
-
-
-def on_page_markdown(markdown, page, config, files, **kwargs):
-    if CLI_MARKER in markdown:
-        markdown = markdown.replace(CLI_MARKER, cli_reference())
-    depth = page.file.src_uri.count("/")
-    for old, new in _LINKS:
-        markdown = markdown.replace(old, "](" + "../" * depth + new[2:])
-    return markdown
-
-
-
-
-SOURCE_TREE = Path(__file__).resolve().parent.parent / "build" / "docs-src"
-"""Where [`on_startup`][] lays out `jaxrod` for the API pages (`paths` in mkdocs.yml)."""
+_LINKS = (("](../benchmarks/", "bench/"), ("](../notebooks/", "examples/"))
 
 
 def on_startup(command, dirty, **kwargs):
@@ -70,14 +43,8 @@ def on_startup(command, dirty, **kwargs):
     (pkg / "design").symlink_to(repo / "design")
 
 
-CLI_MARKER = "<!-- cli-reference -->"
-"""Where [`on_page_markdown`][] writes every subcommand's `--help` into the command-line page."""
-
-
 def cli_reference() -> str:
     """Markdown of `jaxrod --help` and every subcommand's `--help`, as the parser prints them."""
-    import os
-
     from jaxrod.cli._main import _build_parser
 
     old = os.environ.get("COLUMNS")
@@ -94,3 +61,33 @@ def cli_reference() -> str:
         else:
             os.environ["COLUMNS"] = old
     return "\n".join(parts)
+
+
+def on_page_markdown(markdown, page, config, files, **kwargs):
+    if CLI_MARKER in markdown:
+        markdown = markdown.replace(CLI_MARKER, cli_reference())
+    up = "../" * page.file.src_uri.count("/")
+    for old, new in _LINKS:
+        markdown = markdown.replace(old, "](" + up + new)
+    return markdown
+
+
+def _mathjax_root() -> Path:
+    import importlib.util
+
+    spec = importlib.util.find_spec("mathjax")
+    if spec is None or not spec.submodule_search_locations:
+        raise RuntimeError("the docs need the django-static-mathjax package: pip install -e '.[docs]'")
+    root = Path(next(iter(spec.submodule_search_locations))) / "static" / "mathjax" / "es5"
+    if not (root / "tex-chtml.js").is_file():
+        raise RuntimeError(f"MathJax not found under {root}")
+    return root
+
+
+def on_post_build(config, **kwargs):
+    root = _mathjax_root()
+    out = Path(config["site_dir"]) / "mathjax"
+    out.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(root / "tex-chtml.js", out / "tex-chtml.js")
+    fonts = Path("output") / "chtml" / "fonts" / "woff-v2"
+    shutil.copytree(root / fonts, out / fonts, dirs_exist_ok=True)

@@ -24,8 +24,11 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 
 
-def execute(path: Path, *, quick: bool = False, timeout: int = 3600):
-    """The notebook at `path` executed in a fresh kernel (its stored outputs dropped first)."""
+def execute(path: Path, *, quick: bool = False, timeout: int = 3600, extra_cells=()):
+    """The notebook at `path` executed in a fresh kernel from its folder, its stored outputs
+    dropped first; `quick` sets `JAXROD_QUICK=1` for the kernel, else it is unset; the sources
+    in `extra_cells` run as code cells appended after the notebook's own (the file is untouched;
+    the tests read what the kernel holds at the end this way)."""
     import nbclient
     import nbformat
 
@@ -33,20 +36,20 @@ def execute(path: Path, *, quick: bool = False, timeout: int = 3600):
     for cell in nb.cells:
         if cell.cell_type == "code":
             cell.outputs, cell.execution_count = [], None
-    env = dict(os.environ)
+    nb.cells += [nbformat.v4.new_code_cell(src) for src in extra_cells]
+    old = os.environ.get("JAXROD_QUICK")  # the kernel inherits this process's environment
     if quick:
-        env["JAXROD_QUICK"] = "1"
+        os.environ["JAXROD_QUICK"] = "1"
     else:
-        env.pop("JAXROD_QUICK", None)
-    old = dict(os.environ)
-    os.environ.clear()
-    os.environ.update(env)  # the kernel inherits this process's environment
+        os.environ.pop("JAXROD_QUICK", None)
     try:
         nbclient.NotebookClient(nb, timeout=timeout, kernel_name="python3",
                                 resources={"metadata": {"path": str(path.parent)}}).execute()
     finally:
-        os.environ.clear()
-        os.environ.update(old)
+        if old is None:
+            os.environ.pop("JAXROD_QUICK", None)
+        else:
+            os.environ["JAXROD_QUICK"] = old
     return nb
 
 

@@ -87,32 +87,18 @@ def loglog_slope(x, y):
 
 def run_notebook(name, timeout=600, extra_cells=()):
     """Execute notebooks/NAME in quick mode (JAXROD_QUICK=1) with nbclient, its committed
-    outputs dropped first; returns the executed notebook. `extra_cells`: sources of
-    code cells appended to the executed copy (the committed notebook is untouched), to
-    report what the kernel holds at the end (figures, variables) for the test to read."""
-    import os
+    outputs dropped first (`notebooks/execute.py`'s `execute`); returns the executed notebook.
+    `extra_cells`: sources of code cells appended to the executed copy (the committed notebook
+    is untouched), to report what the kernel holds at the end (figures, variables) for the test
+    to read."""
+    import importlib.util
     from pathlib import Path
 
-    import nbclient
-    import nbformat
-
-    nb_dir = Path(__file__).resolve().parent.parent / "notebooks"
-    nb = nbformat.read(nb_dir / name, as_version=4)
-    for c in nb.cells:
-        if c.cell_type == "code":
-            c.outputs, c.execution_count = [], None
-    nb.cells += [nbformat.v4.new_code_cell(src) for src in extra_cells]
-    old = os.environ.get("JAXROD_QUICK")
-    os.environ["JAXROD_QUICK"] = "1"
-    try:
-        nbclient.NotebookClient(nb, timeout=timeout, kernel_name="python3",
-                                resources={"metadata": {"path": str(nb_dir)}}).execute()
-    finally:
-        if old is None:
-            os.environ.pop("JAXROD_QUICK", None)
-        else:
-            os.environ["JAXROD_QUICK"] = old
-    return nb
+    path = Path(__file__).resolve().parent.parent / "notebooks" / "execute.py"
+    spec = importlib.util.spec_from_file_location("_notebooks_execute", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.execute(path.parent / name, quick=True, timeout=timeout, extra_cells=extra_cells)
 
 
 def notebook_text(nb):
