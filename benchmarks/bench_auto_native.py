@@ -39,8 +39,7 @@ rotation; the two snap angles alpha_c up (snap up from the down state) and alpha
   files, parsing fort.7/fort.8); the gfortran build of the equation file is the "compile".
 * jaxrod: `jr.snap_angles_extrapolated(jr.make_scene(60, 0.5, n=100))` (both states by
   homotopy, both paths, refinement, Richardson from n = 100 and 200) called as users call it:
-  the two meshes are two programs, run (and compiled) concurrently on the machine's cores
-  (`jaxrod._misc.concurrently`); the first call (trace + XLA compile + run) and the median of
+  the two meshes are two programs, run one after the other; the first call (trace + XLA compile + run) and the median of
   repeated calls. At matched accuracy: the smallest uniform mesh and the smallest graded mesh
   (`refine=2`: segments twice as short at the crease, `GRADED_REFINE`) whose extrapolation is
   within 0.002 deg, each called as users call it and under `jax.jit` (one program: both
@@ -422,7 +421,7 @@ def matched_n(ref, log, candidates=MATCHED_CANDIDATES, refine=1.0):
 
 
 def jaxrod_extrapolated_fn():
-    """`snap_angles_extrapolated` as users call it (the meshes concurrently, one program each)."""
+    """`snap_angles_extrapolated` as users call it (one program per mesh, one after the other)."""
     return jr.snap_angles_extrapolated
 
 

@@ -26,7 +26,7 @@ s0 = 0.02 L, N = 100, float64):
   first call (eager operations count: each is a small program of its own); the record
   durations give XLA's compile time (summed), the lowering time (summed) and the tracing
   time (union of the intervals, since nested jits are traced inside their caller).
-* For the entry points that are themselves jitted (`jaxrod._misc.jit`, an `equinox.filter_jit` with XLA options: `initial_state`,
+* For the entry points that are themselves jitted (`jaxrod._compile.jit`, an `equinox.filter_jit` with XLA options: `initial_state`,
   `solve_equilibrium`, `stability`, `snap_angles`) and cheap (first call under `--aot-below`,
   default 15 s; `--aot-below 0` turns it off), a second fresh process times the ahead-of-time
   path: `f.lower(...)` (trace + lowering), `.compile()` (XLA), and a call of the compiled
@@ -51,9 +51,9 @@ Targets (the compile budget): `snap_angles`, `phase_diagram`, `snap_dynamics` tr
 
 `--mode` sets `JAXROD_COMPILE` in every process: "auto" (jaxrod's default: each program
 compiled first with the fast code generation and again with XLA's optimizing one once its
-calls have run long enough, `jaxrod._misc.compile_mode`; the second call of this benchmark
-stays below that point, so both calls time the first tier), "fast" (XLA's -O0 and older loop
-emitters, `jaxrod._misc.FAST_COMPILE_OPTIONS`, writes compile_fast.json / .md) or
+calls have run long enough, `jaxrod._compile.compile_mode`; the second call of this benchmark
+stays below that point, so both calls time the fast variant), "fast" (XLA's -O0 and older loop
+emitters, `jaxrod._compile.FAST_COMPILE_OPTIONS`, writes compile_fast.json / .md) or
 "optimized" (XLA's optimizing code generation from the first call, writes
 compile_optimized.json / .md).
 
@@ -451,13 +451,13 @@ def _markdown(res):
          + ("other jobs shared the cores during the run, so every time below is an upper bound."
             if max(la0[0], la1[0]) > 0.5 else "the machine was otherwise idle."), "",
          *([{"fast": "Compile mode `JAXROD_COMPILE=fast` in every process: XLA's -O0 and older loop emitters "
-                    "(`jaxrod._misc.FAST_COMPILE_OPTIONS`), slower code, the same results to round-off.",
+                    "(`jaxrod._compile.FAST_COMPILE_OPTIONS`), slower code, the same results to round-off.",
             "optimized": "Compile mode `JAXROD_COMPILE=optimized` in every process: XLA's optimizing code "
                          "generation from the first call.",
             "auto": "Compile mode `auto`, jaxrod's default, in every process: each program is compiled first "
-                    "with the fast code generation (`jaxrod._misc.FAST_COMPILE_OPTIONS`) and again with XLA's "
-                    "optimizing one once its calls have run for `jaxrod._misc.TIER_UP_FACTOR` times that first "
-                    "compile; both calls below run the first tier (compile_optimized.md has the second "
+                    "with the fast code generation (`jaxrod._compile.FAST_COMPILE_OPTIONS`) and again with XLA's "
+                    "optimizing one once its calls have run for `jaxrod._compile.TIER_UP_FACTOR` times that first "
+                    "compile; both calls below run the fast variant (compile_optimized.md has the optimized one "
                     "from the start)."}[meta.get("compile_mode", "optimized")], ""]),
          "Scene `jr.make_scene(60, 0.5, n=100)` (Psi0 = 60 deg, G/L = 0.5, s0 = 0.02 L, N = 100), float64. "
          "Each entry point runs in a fresh process without a persistent compilation cache and is called twice: "
@@ -503,7 +503,7 @@ def _markdown(res):
               + " to compile in the processes of this run that compile it (the same function and arguments; the "
               "processes differ only in what else ran on the cores at the time)."]
     if aot:
-        L += ["", "Ahead of time, for the entry points that are jitted themselves (`jaxrod._misc.jit`, an `equinox.filter_jit` with XLA options) and whose "
+        L += ["", "Ahead of time, for the entry points that are jitted themselves (`jaxrod._compile.jit`, an `equinox.filter_jit` with XLA options) and whose "
               f"first call took under {meta['aot_below_s']:g} s, each in another fresh process: `f.lower(*args)` "
               "(trace + lowering), `.compile()` (XLA), the compiled executable's first and steady (median of 3) "
               "run, and its fused kernels (` fusion(` calls in its optimized HLO: a measure of the compile's size "
@@ -532,7 +532,7 @@ def _markdown(res):
         big = ", ".join(f"`{t['name']}` {t['compile_s']:.1f} s" for t in cold["top_programs"][:2]) if cold else ""
         L += ["", "The command's default is Richardson extrapolation (`--no-extrapolate` turns it off): the values "
               "of `jr.snap_angles_extrapolated` from `snap_angles` at N = 100 and at N = 200, two programs, one per "
-              "mesh, compiled with the fast code generation (the first tier of the default compile mode; the "
+              "mesh, compiled with the fast code generation (the first variant of the default compile mode; the "
               "optimized one where `JAXROD_COMPILE=optimized`)"
               + (f" (the largest programs of the cold run: {big})" if big else "") + ". "
               "The first run exports each (`jax.export`; one traces while the other compiles) beside the XLA "

@@ -22,7 +22,7 @@ if "xla_cpu_multi_thread_eigen" not in os.environ.get("XLA_FLAGS", ""):
 
 from .results import RESULTS as RESULTS
 from .results import result_name as result_name
-from ._misc import clear_caches as clear_caches
+from ._compile import clear_caches as clear_caches
 
 # model: what the strip is
 from .model import Clamps as Clamps

@@ -65,10 +65,10 @@ if "xla_backend_optimization_level" not in _flags:
 if "xla_cpu_use_fusion_emitters" not in _flags:
     _flags += " --xla_cpu_use_fusion_emitters=false"
 os.environ["XLA_FLAGS"] = _flags.strip()
-# With those flags every compile is at -O0, so jaxrod's default compile mode would tier a
-# long-running program up to an "optimized" compile that is -O0 again: the suite keeps the
-# first tier ("fast"; tests/test_jit.py sets the modes it tests itself).
-os.environ.setdefault("JAXROD_COMPILE", "fast")
+# The suite runs jaxrod's default compile mode ("auto", `jaxrod._compile`), the user's path:
+# with the flags above its optimized variant is compiled at -O0 too, so a signature whose
+# calls switch to it costs one more compile at the same level (tests/test_jit.py sets the
+# modes it tests itself).
 
 import jax  # noqa: E402
 import pytest  # noqa: E402

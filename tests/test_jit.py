@@ -1,4 +1,5 @@
-"""jaxrod's jit: XLA options at the top level, the plain jit inside any JAX transformation."""
+"""jaxrod's entry points (`jaxrod._compile`): XLA options at the top level, the plain jit inside
+any JAX transformation, the compile modes and the rent-or-buy switch of the default one."""
 
 import contextlib
 import os
@@ -10,7 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from jaxrod._misc import jit
+from jaxrod import _compile
+from jaxrod._compile import jit
 
 
 def _sqrt(a):
@@ -68,9 +70,8 @@ def test_options_reach_the_compiler():
 
 
 def _program(f, *args, **kwargs):
-    from jaxrod._misc import _signature
-
-    return f.programs.table[_signature(args, kwargs)].compiled
+    """The compiled program that a top-level call of `f` with these arguments runs now."""
+    return f._variant(f.variant_of(*args, **kwargs)).lower(*args, **kwargs).compile()
 
 
 @contextlib.contextmanager
@@ -87,10 +88,10 @@ def _env(name, value):
 
 
 def test_compile_modes(monkeypatch):
-    """JAXROD_COMPILE: "auto" (the default) and "fast" compile the first tier with
-    FAST_COMPILE_OPTIONS, "optimized" with COMPILER_OPTIONS alone; the same values in every
-    mode; a bad value is one ValueError naming the variable, and the CLI's exit 2."""
-    from jaxrod._misc import COMPILER_OPTIONS, FAST_COMPILE_OPTIONS, compile_mode, compiler_options
+    """JAXROD_COMPILE: "auto" (the default) and "fast" start with FAST_COMPILE_OPTIONS,
+    "optimized" uses COMPILER_OPTIONS alone; the same values in every mode; a bad value is
+    one ValueError naming the variable, and the CLI's exit 2."""
+    from jaxrod._compile import COMPILER_OPTIONS, FAST_COMPILE_OPTIONS, compile_mode, compiler_options
     from jaxrod.cli import main
 
     a = jnp.asarray(2.0)
@@ -115,90 +116,79 @@ def test_compile_modes(monkeypatch):
     assert main(["equilibrium", "--n", "8", "--json"]) == 2
 
 
-def _tier(f, *args, **kwargs):
-    from jaxrod._misc import _signature
-
-    return f.programs.table[_signature(args, kwargs)].tier
-
-
-def test_auto_mode_tiers_up_after_enough_run_time(monkeypatch):
-    """In the "auto" mode a program is compiled with the fast code generation and runs from
-    it until its calls have run for TIER_UP_FACTOR times that compile, then is compiled with
-    the optimizing one on a thread of its own, which replaces it when done (same values);
-    "optimized" compiles it optimized at once, and
-    "fast" never tiers up. A new static value or weak type is a new program."""
-    from jaxrod import _misc
-
+def test_auto_mode_switches_after_enough_run_time(monkeypatch):
+    """In the "auto" mode the calls of one argument signature run the fast variant until they
+    have run for TIER_UP_FACTOR times their first call, then the optimized one (same values);
+    "optimized" runs the optimized one at once and "fast" never switches. A new static value,
+    dtype or weak type is a new signature, accounted apart."""
     monkeypatch.delenv("JAXROD_COMPILE", raising=False)
     f = jit(_sqrt)
     a = jnp.asarray(3.0)
     ref = float(f(a))
-    assert _tier(f, a) == "fast"
-    prog = f.programs.table[_misc._signature((a,), {})]
-    assert prog.run_s > 0 and prog.compile_s > 0
+    assert f.variant_of(a) == "fast"
+    (account,) = f._accounts.values()
+    assert account.first_s > 0 and account.run_s == 0.0
+    monkeypatch.setattr(_compile, "TIER_UP_FACTOR", 0.0)
     monkeypatch.setenv("JAXROD_COMPILE", "fast")
-    monkeypatch.setattr(_misc, "TIER_UP_FACTOR", 0.0)
-    assert float(f(a)) == ref and _tier(f, a) == "fast"
+    assert float(f(a)) == ref and f.variant_of(a) == "fast" and account.run_s == 0.0
     monkeypatch.delenv("JAXROD_COMPILE")
-    fast = prog.compiled
-    assert float(f(a)) == ref  # the fast program's value; the optimized compile starts on a thread
-    assert prog.tier_up is not None and prog.tier_up.name == "jaxrod-tier-up" and not prog.tier_up.daemon
-    prog.wait()
-    assert _tier(f, a) == "optimized" and prog.compiled is not fast
-    assert float(f(a)) == ref  # from the optimized program
-    f(a)
-    assert prog.compiled is not fast and _tier(f, a) == "optimized"  # no second tier-up
-    monkeypatch.setattr(_misc, "TIER_UP_FACTOR", 1e9)
+    assert float(f(a)) == ref  # the fast variant's value; its run time reaches the factor ...
+    assert account.run_s > 0 and f.variant_of(a) == "optimized"
+    assert float(f(a)) == ref  # ... and the next call runs the optimized variant
+    assert set(f._variants) == {"fast", "optimized"}
+    monkeypatch.setattr(_compile, "TIER_UP_FACTOR", 1e9)
     b = jnp.asarray(np.float64(3.0), dtype=jnp.float64)
     w = jnp.asarray(3.0)  # weak-typed (a Python float)
     assert not b.weak_type and w.weak_type
     f(b)
-    assert _tier(f, b) == "fast" and len(f.programs.table) == 2
+    assert f.variant_of(b) == "fast" and len(f._accounts) == 2
     g = jit(lambda x, k: x * k)
     assert float(g(a, 2.0)) == 6.0 and float(g(a, 3.0)) == 9.0 and float(g(a, 3)) == 9.0
-    assert len(g.programs.table) == 3  # 2.0, 3.0 and the integer 3 are three static values
+    assert len(g._accounts) == 3  # 2.0, 3.0 and the integer 3 are three static values
     monkeypatch.setenv("JAXROD_COMPILE", "optimized")
     h = jit(_sqrt)
     h(a)
-    assert _tier(h, a) == "optimized"
+    assert h.variant_of(a) == "optimized" and set(h._variants) == {"optimized"} and not h._accounts
 
 
-def test_prepare_and_program_beside(monkeypatch):
-    """`.prepare` compiles without running, and a call then reuses that program; `with_program_beside` returns what `make()` returns and leaves
-    the program compiled for the arguments that its result gives."""
-    from jaxrod import _misc
+def test_errors_reach_the_caller_in_every_mode(monkeypatch):
+    """An `equinox.error_if` inside an entry point raises `equinox.EquinoxRuntimeError` with
+    its message in every compile mode (the default's included), as a plain jit does (the
+    suite's EQX_ON_ERROR=nan overridden by `on_error`)."""
+    checked = jit(lambda x: eqx.error_if(x, x < 0, "x must not be negative", on_error="raise"))
+    for mode in ("auto", "fast", "optimized"):
+        monkeypatch.setenv("JAXROD_COMPILE", mode)
+        assert float(checked(jnp.asarray(1.0))) == 1.0
+        try:
+            checked(jnp.asarray(-1.0))
+        except eqx.EquinoxRuntimeError as e:
+            assert "x must not be negative" in str(e)
+        else:
+            raise AssertionError(f"no error in mode {mode}")
 
-    monkeypatch.delenv("JAXROD_COMPILE", raising=False)
-    monkeypatch.setattr(_misc, "TIER_UP_FACTOR", 1e9)
-    f = jit(_sqrt)
-    a = jnp.asarray(5.0)
-    f.prepare(a)
-    prog = f.programs.table[_misc._signature((a,), {})]
-    compiled = prog.compiled
-    assert compiled is not None and prog.run_s == 0.0
-    assert float(f(a)) == float(np.sqrt(5.0)) and prog.compiled is compiled
 
-    double = jit(lambda x: 2.0 * x)
-    monkeypatch.setattr(_misc.os, "sched_getaffinity", lambda _: {0, 1}, raising=False)
-    x = jnp.arange(4.0)
-    x = x + 1.0
-    made = _misc.with_program_beside(lambda: double(x), _newton_sqrt, lambda y: ((y,), {}))
-    np.testing.assert_array_equal(made, 2.0 * x)
-    prog = _newton_sqrt.programs.table[_misc._signature((made,), {})]
-    assert prog.compiled is not None and prog.run_s == 0.0  # compiled beside, not run
-    np.testing.assert_allclose(_newton_sqrt(made), np.sqrt(2.0 * np.arange(1.0, 5.0)), rtol=1e-15)
-    # a `make` that needs concrete values (no abstract trace): it runs alone
-    concrete = _misc.with_program_beside(lambda: float(x[1]) * 2.0, _newton_sqrt, lambda y: ((y,), {}))
-    assert concrete == 4.0
-    assert not _misc.TRACING._is_owned()
+def test_top_level_detection():
+    """`at_top_level`: True for a plain call, False under every transformation, also where
+    the arguments are concrete (a closure under `jax.jit`)."""
+    c = jnp.asarray(1.0)
+    assert _compile.at_top_level((c,))
+    seen = []
+    jax.jit(lambda: seen.append(_compile.at_top_level((c,))) or c)()
+    jax.vmap(lambda y: seen.append(_compile.at_top_level((y,))) or y)(jnp.ones(2))
+    jax.grad(lambda y: seen.append(_compile.at_top_level((y,))) or y)(1.0)
+    lax.scan(lambda k, y: (seen.append(_compile.at_top_level((c,))) or k, y), 0.0, jnp.ones(2))
+    assert seen == [False] * 4
+    # a closure under jit calls the entry point with concrete arguments: the plain jit there
+    np.testing.assert_allclose(jax.jit(lambda: _newton_sqrt(c * 4.0))(), 2.0, rtol=1e-15)
+    np.testing.assert_allclose(jax.jit(lambda: _newton_sqrt(jnp.asarray(9.0)))(), 3.0, rtol=1e-15)
 
 
 def test_dynamics_programs_keep_xla_loop_passes(monkeypatch):
     """The dynamics' jit compiles with XLA's defaults when optimized (the loop-invariant sine
     hoisted out of the loop, as without jaxrod's options), with FAST_COMPILE_OPTIONS alone
-    when fast (the first tier of the default mode); the same values either way, through
+    when fast (the first variant of the default mode); the same values either way, through
     `.lower` and through the call."""
-    from jaxrod._misc import FAST_COMPILE_OPTIONS, compiler_options, dynamics_jit
+    from jaxrod._compile import FAST_COMPILE_OPTIONS, compiler_options, dynamics_jit
 
     args = (jnp.asarray(2.0), jnp.asarray(3.0))
     loop = dynamics_jit(_invariant_loop)
@@ -214,70 +204,16 @@ def test_dynamics_programs_keep_xla_loop_passes(monkeypatch):
         assert float(loop(*args)) == ref
 
 
-def test_concurrently_runs_calls_in_threads_and_keeps_their_meaning(monkeypatch):
-    """`concurrently`: results in order; calls on other threads where the machine has cores
-    (each program runs on its caller's thread); a worker without the caller's thread-local
-    JAX configuration hands its call back; exceptions reach the caller; under a
-    transformation (or on one core) the calls run one after the other on the caller's
-    thread."""
-    import threading
-
-    from jaxrod import _misc
-
-    monkeypatch.setattr(_misc.os, "sched_getaffinity", lambda _: {0, 1}, raising=False)
-    monkeypatch.setattr(_misc.os, "cpu_count", lambda: 2)
-    a = jnp.asarray(2.0)
-    names = []
-
-    def call(x):
-        names.append(threading.current_thread().name)
-        return _newton_sqrt(x)
-
-    r = _misc.concurrently(lambda: call(a), lambda: call(a + 7.0), lambda: call(a + 14.0))
-    np.testing.assert_allclose(r, [np.sqrt(2.0), 3.0, 4.0], rtol=1e-15)
-    assert threading.current_thread().name in names  # the first call ran on the caller's thread ...
-    assert len(set(names)) >= 2, names  # ... and the others on worker threads
-    # a thread-local configuration is honoured: the worker gives the call back
-    with jax.enable_x64(False):
-        dtypes = _misc.concurrently(lambda: jnp.ones(2).dtype, lambda: jnp.ones(2).dtype)
-    assert dtypes == (jnp.float32, jnp.float32)
-    with jax.enable_x64(True):
-        assert _misc.concurrently(lambda: jnp.ones(2).dtype, lambda: jnp.ones(2).dtype) == (jnp.float64,) * 2
-
-    def fails():
-        raise ValueError("psi0 must be finite")
-
-    try:
-        _misc.concurrently(lambda: 1, fails)
-    except ValueError as e:
-        assert "psi0" in str(e)
-    else:
-        raise AssertionError("the worker's exception did not reach the caller")
-    # nested: a call on a worker thread runs its own calls there, one after the other
-    inner = _misc.concurrently(lambda: 0, lambda: _misc.concurrently(
-        lambda: threading.current_thread().name, lambda: threading.current_thread().name))[1]
-    assert inner[0] == inner[1] and inner[0].startswith("jaxrod-worker"), inner
-    # under jit: one thread, and the values are those of the plain calls
-    names.clear()
-    out = jax.jit(lambda x: jnp.stack(_misc.concurrently(lambda: call(x), lambda: call(x + 7.0))))(a)
-    np.testing.assert_allclose(out, [np.sqrt(2.0), 3.0], rtol=1e-15)
-    assert set(names) == {threading.current_thread().name}
-    # one core: one thread
-    monkeypatch.setattr(_misc.os, "sched_getaffinity", lambda _: {0}, raising=False)
-    names.clear()
-    _misc.concurrently(lambda: call(a), lambda: call(a))
-    assert set(names) == {threading.current_thread().name}
-
-
-def test_clear_caches_releases_jaxrods_programs():
-    """`jaxrod.clear_caches()` empties every jitted function's program table (and JAX's
-    caches); the next call compiles again, to the same value."""
+def test_clear_caches_forgets_the_accounts():
+    """`jaxrod.clear_caches()` forgets every entry point's run-time accounts (and clears JAX's
+    caches); the next call starts on the fast variant again, to the same value."""
     import jaxrod
 
     f = jit(_sqrt)
     a = jnp.asarray(7.0)
-    ref = float(f(a))
-    assert len(f.programs.table) == 1
-    jaxrod.clear_caches()
-    assert len(f.programs.table) == 0
-    assert float(f(a)) == ref and len(f.programs.table) == 1
+    with _env("JAXROD_COMPILE", "auto"):
+        ref = float(f(a))
+        assert len(f._accounts) == 1
+        jaxrod.clear_caches()
+        assert len(f._accounts) == 0
+        assert float(f(a)) == ref and len(f._accounts) == 1

@@ -17,7 +17,7 @@ import sys
 import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-# the shared base (results, _misc, _custom_types and the package root's own files) is layer 0
+# the shared base (results, _misc, _compile, _custom_types and the package root's own files) is layer 0
 RANK = {"model": 1, "energy": 2, "linalg": 3, "sweeps": 3, "statics": 4, "branches": 5, "dynamics": 6, "design": 7,
         "plot": 8, "cli": 9}
 CORE = {"model", "energy", "linalg", "sweeps", "statics", "branches", "dynamics"}

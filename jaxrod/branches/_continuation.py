@@ -37,7 +37,8 @@ from ..energy.contact import self_intersects
 from ..energy.lagrangian import lagrangian_gradient, positions
 from ..statics import float_scene
 from .._lanes import machine_vmap
-from .._misc import check_bool, check_int, check_number, check_sign, is_concrete, jit, run_if
+from .._misc import check_bool, check_int, check_number, check_sign, is_concrete, run_if
+from .._compile import jit
 from ..results import RESULTS
 
 

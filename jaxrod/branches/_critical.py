@@ -75,7 +75,8 @@ from ..linalg import batched
 from ._continuation import AbstractParameter, Gap, SymmetricAlpha
 from ..energy.geometry import discretize
 from ..energy.lagrangian import lagrangian_gradient, positions
-from .._misc import check_int, check_number, is_concrete, jit
+from .._misc import check_int, check_number, is_concrete
+from .._compile import jit
 from ..results import RESULTS
 
 

@@ -50,7 +50,8 @@ from ._continuation import AbstractParameter, SymmetricAlpha, _check_bounds, req
 from ._critical import (CriticalPoint, CuspPoint, KIND_BRANCH_POINT, _fold_pack, _fold_residual, _fold_unpack, _set_gap, _sym_pack, _sym_residual, _sym_unpack, cusp_point)
 from ..energy.geometry import discretize
 from ..energy.lagrangian import positions
-from .._misc import check_int, check_number, jit
+from .._misc import check_int, check_number
+from .._compile import jit
 from ..results import RESULTS
 
 

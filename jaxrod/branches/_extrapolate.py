@@ -30,7 +30,6 @@ from jaxtyping import Array
 
 from ..model import Mesh, Scene
 from ._snap import SnapAngles, SnapPath, snap_angles
-from .._misc import concurrently
 from ..results import RESULTS
 
 
@@ -133,9 +132,8 @@ def extrapolate_path(c: SnapPath, f: SnapPath) -> ExtrapolatedPath:
 def snap_angles_extrapolated(scene: Scene, *, continue_after_snap: bool = False, **kwargs) -> ExtrapolatedSnapAngles:
     r"""[`jaxrod.snap_angles`][] on the scene's mesh ($N$) and on one twice as fine, and
     their Richardson extrapolation (module docstring). `kwargs` go to `snap_angles`.
-    Costs one `snap_angles` at $N$ plus one at $2N$ (two compilations on first use); called
-    outside `jit` and other transformations on a machine with two or more cores, the two run
-    concurrently (`jaxrod._misc.concurrently`): about the time of the fine mesh alone.
+    Costs one `snap_angles` at $N$ plus one at $2N$ (two compilations on first use), run one
+    after the other (under `jax.vmap` each member's two meshes).
 
     `continue_after_snap` defaults to False here: the landed branch after each snap (the
     post-snap stage of the hysteresis figures) does not change the critical angles or the
@@ -144,7 +142,7 @@ def snap_angles_extrapolated(scene: Scene, *, continue_after_snap: bool = False,
     fine_scene = refined_scene(scene)
     kwargs = dict(kwargs, continue_after_snap=continue_after_snap)
 
-    fine, coarse = concurrently(lambda: snap_angles(fine_scene, **kwargs), lambda: snap_angles(scene, **kwargs))
+    fine, coarse = snap_angles(fine_scene, **kwargs), snap_angles(scene, **kwargs)
     up, down = _extrapolate_paths(*(_read(getattr(m, d)) for m in (coarse, fine) for d in ("up", "down")))
     return ExtrapolatedSnapAngles(up=up, down=down, coarse=coarse, fine=fine, n_coarse=scene.mesh.n,
                                   n_fine=fine_scene.mesh.n)

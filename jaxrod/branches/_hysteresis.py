@@ -31,7 +31,8 @@ from ._continuation import Continuation, SymmetricAlpha, continue_branch, requir
 from ..energy.lagrangian import energies as _energies
 from ..energy.lagrangian import positions
 from ..statics import float_scene
-from .._misc import check_int, check_number, jit
+from .._misc import check_int, check_number
+from .._compile import jit
 from ._snap import SnapAngles, snap_angles
 from ..results import RESULTS
 from ..statics import Equilibrium

@@ -68,7 +68,8 @@ from jax import lax
 from ._continuation import Continuation, SymmetricAlpha
 from ..statics import float_scene
 from ..statics import initial_state_signed
-from .._misc import check_grid, fold_widths, package_version, jit
+from .._misc import check_grid, fold_widths, package_version
+from .._compile import jit
 from ..model import Clamps, Contact, crease_layout, layout_strip, Mesh, Scene
 from ._snap import _snap_angles_from
 from ._warm import near_pair, unusable_near

@@ -37,7 +37,8 @@ from jaxtyping import Array
 
 from ..results import RESULTS
 from ..statics import Equilibrium, float_scene, mode_parity
-from .._misc import check_int, check_number, run_if, jit
+from .._misc import check_int, check_number, run_if
+from .._compile import jit
 from ._continuation import (STOP_FULL, STOP_STEP, STOP_UNSTABLE, Continuation, SymmetricAlpha, continue_branch,
                             require_float64)
 from ._critical import located_critical_point

@@ -45,7 +45,8 @@ from ..energy.geometry import discretize
 from ..statics import Newton, float_scene
 from ..statics import initial_state_signed
 from .._lanes import in_turn
-from .._misc import check_bool, check_int, check_number, run_if, jit
+from .._misc import check_bool, check_int, check_number, run_if
+from .._compile import jit
 from ..results import RESULTS
 from ..statics import Equilibrium
 from ..statics import mode_parity

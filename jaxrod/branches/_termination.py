@@ -76,7 +76,8 @@ import jax.numpy as jnp
 from jax import lax
 import numpy as np
 
-from .._misc import check_param, jit
+from .._misc import check_param
+from .._compile import jit
 from ..model import crease_layout, make_scene
 from ..results import RESULTS, result_name
 

@@ -68,10 +68,10 @@ def cache_key(name: str, static, leaves) -> str:
 
 
 def _call(exp, leaves):
-    """Run an exported program, compiled with jaxrod's XLA options (`jaxrod._misc.compiler_options`)."""
+    """Run an exported program, compiled with jaxrod's XLA options (`jaxrod._compile.compiler_options`)."""
     import jax
 
-    from .._misc import compiler_options
+    from .._compile import compiler_options
 
     return jax.jit(exp.call, compiler_options=compiler_options())(*leaves)
 
@@ -107,12 +107,7 @@ def call(name: str, fn, scene, directory: str | None = None):
             return _call(exp, leaves), "loaded"
         except Exception:  # noqa: BLE001 - a damaged file is replaced below
             pass
-    from .._misc import TRACING
-
-    # two queries exported side by side (`jaxrod snap-angles`' two meshes) trace one after the
-    # other: the first compiles while the second traces
-    with TRACING:
-        exp = export.export(jax.jit(flat))(*leaves)
+    exp = export.export(jax.jit(flat))(*leaves)
     try:
         os.makedirs(directory, exist_ok=True)
         tmp = f"{path}.{os.getpid()}.tmp"

@@ -595,7 +595,7 @@ def _cmd_snap_angles(args):
     from . import _exported
 
     # one exported program per (query, mesh, contact model): a repeated query traces nothing.
-    # Extrapolated, the two meshes are two programs, run (and compiled) concurrently
+    # Extrapolated, the two meshes are two programs
     def one_mesh(scene, continue_after_snap):
         name = "snap_angles" if continue_after_snap else "snap_angles_no_continuation"
         out, _ = _exported.call(name, functools.partial(_snap_arrays, continue_after_snap=continue_after_snap),
@@ -605,10 +605,8 @@ def _cmd_snap_angles(args):
     def run(scene):
         if not args.extrapolate:
             return one_mesh(scene, False)
-        from .._misc import concurrently
-
         fine_scene = jr.refined_scene(scene)
-        fine, coarse = concurrently(lambda: one_mesh(fine_scene, False), lambda: one_mesh(scene, False))
+        fine, coarse = one_mesh(fine_scene, False), one_mesh(scene, False)
         return _extrapolated_arrays(coarse, fine)
 
     out = run(scene)
@@ -744,7 +742,7 @@ def main(argv=None):
         # the library's warnings (an under-resolved crease, ...) as one line each
         warnings.showwarning = lambda message, *a, **k: print(f"jaxrod: warning: {message}", file=sys.stderr)
         try:
-            from .._misc import compile_mode
+            from .._compile import compile_mode
 
             try:
                 compile_mode()  # JAXROD_COMPILE: checked before anything is compiled

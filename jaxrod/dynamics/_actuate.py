@@ -66,7 +66,8 @@ from ._simulate import DT_CAP
 from ..energy.contact import safe_norm
 from ..energy.geometry import discretize, scene_dtype
 from ..results import RESULTS
-from .._misc import check_int, check_number, dynamics_jit
+from .._misc import check_int, check_number
+from .._compile import dynamics_jit
 
 
 BODY_COURANT = 0.2

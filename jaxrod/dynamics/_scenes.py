@@ -34,7 +34,8 @@ from ._equations import Protocol, check_run_settings
 from ..energy.geometry import discretize, mode_sign
 from ..statics import initial_state
 from ..linalg.batched import solve2
-from .._misc import check_param, dynamics_jit, with_program_beside
+from .._misc import check_param
+from .._compile import dynamics_jit
 from ..branches import snap_angles, snap_routes
 from ..results import RESULTS
 from ..energy.bending import bending_energy as _bending
@@ -289,10 +290,6 @@ def snap_dynamics(scene, direction="up", *, kind="brink", nudge=NUDGE, past=1e-3
         simulate_kwargs.setdefault("stop_at_snap", False)
     simulate_kwargs.setdefault("direction", _direction(direction))
 
-    def arguments(start):
-        return (start.scene, start.theta0, start.protocol), simulate_kwargs
-
-    # simulate's program is compiled for the start's shapes while the statics compile
-    start = with_program_beside(make, simulate, arguments)
+    start = make()
     traj = simulate(start.scene, start.theta0, start.protocol, **simulate_kwargs)
     return start, traj

@@ -46,7 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._equations import (Dissipation, Protocol, accelerations, check_run_settings, check_scene, kinetic_energy, observables, potential_energy, scene_at)
-from .._misc import dynamics_jit
+from .._compile import dynamics_jit
 from ..energy.geometry import discretize
 from ._implicit import HHT
 from ._rattle import Rattle, RattleStep

@@ -101,7 +101,8 @@ from ._scenes import NUDGE, _brink_start, _direction
 from ._implicit import HHT
 from ._rattle import Rattle
 from ._simulate import FIXED_STEP, HHT_N_FINE, SOLVERS, _rattle_dt_natural, simulate
-from .._misc import check_param, dynamics_jit
+from .._misc import check_param
+from .._compile import dynamics_jit
 from ..branches import snap_angles
 from ..results import RESULTS
 

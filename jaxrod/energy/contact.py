@@ -97,7 +97,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .._misc import run_if, traced_once
+from .._misc import run_if
+from .._compile import traced_once
 from .geometry import discretize
 
 TOL = 1e-9

@@ -45,7 +45,7 @@ import jax.numpy as jnp
 from .bending import bending_energy, turning_angles
 from .contact import contact_energy
 from .geometry import discretize
-from .._misc import traced_once
+from .._compile import traced_once
 
 
 def gravity_weights(scene, d):

@@ -38,7 +38,8 @@ from ..linalg import kkt
 from ..energy.geometry import discretize, scene_dtype
 from ..energy.contact import step_bound
 from ..energy.lagrangian import lagrangian, lagrangian_gradient
-from .._misc import check_bool, check_int, check_number, run_if, jit
+from .._misc import check_bool, check_int, check_number, run_if
+from .._compile import jit
 from ..results import RESULTS
 from ._solution import Equilibrium
 

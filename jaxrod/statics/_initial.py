@@ -45,7 +45,8 @@ from ..energy.geometry import discretize, scene_dtype
 from ..energy.lagrangian import positions
 from ._equilibrium import Newton, _implicit, float_scene, newton_iteration, newton_start, solve_unflagged, flag_contact
 from .._lanes import machine_vmap
-from .._misc import check_int, jit
+from .._misc import check_int
+from .._compile import jit
 from ..results import RESULTS
 from ._solution import Equilibrium
 

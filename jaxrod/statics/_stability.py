@@ -17,7 +17,8 @@ from jaxtyping import Array
 
 from ..linalg import kkt
 from ..linalg.batched import solve2
-from .._misc import check_int, jit
+from .._misc import check_int
+from .._compile import jit
 
 
 class Stability(eqx.Module):
