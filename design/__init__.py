@@ -5,7 +5,8 @@ Objectives (`AlphaUp`, `AlphaDown`, `Hysteresis`, `FoldHeight`, `BendingEnergy`,
 (`optimize`, Levenberg-Marquardt or optax), results that save and reload
 (`DesignResult.save` / `.load`), differentiable critical angles (`critical_angles`) and the
 design studies (`snap_angle_study`, ...), crease positions and angles as design variables
-(`CreaseParametrization`, `two_crease_study`, `crease_position_study`). float64 must be
+(`CreaseParametrization`, `two_crease_study`, `crease_position_study`), and the statistics of
+the snap angles under manufacturing scatter (`Scatter`, `scatter_statistics`, `scatter_mean`). float64 must be
 enabled by the caller.
 """
 
@@ -61,6 +62,12 @@ from ._programs import sequence_speeds as sequence_speeds
 from ._programs import sequence_windows as sequence_windows
 from ._programs import stage_outcome as stage_outcome
 from ._programs import two_knot_program as two_knot_program
+from ._scatter import PathStatistics as PathStatistics
+from ._scatter import Scatter as Scatter
+from ._scatter import scatter_mean as scatter_mean
+from ._scatter import scatter_statistics as scatter_statistics
+from ._scatter import ScatterStatistics as ScatterStatistics
+from ._scatter import score_gradient as score_gradient
 from ._creases import check_creases as check_creases
 from ._creases import crease_gap_for_speed as crease_gap_for_speed
 from ._creases import CreaseGapResult as CreaseGapResult
