@@ -6,7 +6,8 @@ Objectives (`AlphaUp`, `AlphaDown`, `Hysteresis`, `FoldHeight`, `BendingEnergy`,
 (`DesignResult.save` / `.load`), differentiable critical angles (`critical_angles`) and the
 design studies (`snap_angle_study`, ...), crease positions and angles as design variables
 (`CreaseParametrization`, `two_crease_study`, `crease_position_study`), and the statistics of
-the snap angles under manufacturing scatter (`Scatter`, `scatter_statistics`, `scatter_mean`). float64 must be
+the snap angles under manufacturing scatter (`Scatter`, `scatter_statistics`, `scatter_mean`) and
+under imperfections (`imperfection_sensitivity`). float64 must be
 enabled by the caller.
 """
 
@@ -62,6 +63,10 @@ from ._programs import sequence_speeds as sequence_speeds
 from ._programs import sequence_windows as sequence_windows
 from ._programs import stage_outcome as stage_outcome
 from ._programs import two_knot_program as two_knot_program
+from ._imperfections import DirectionSensitivity as DirectionSensitivity
+from ._imperfections import imperfect_scene as imperfect_scene
+from ._imperfections import imperfection_sensitivity as imperfection_sensitivity
+from ._imperfections import ImperfectionSensitivity as ImperfectionSensitivity
 from ._scatter import PathStatistics as PathStatistics
 from ._scatter import Scatter as Scatter
 from ._scatter import scatter_mean as scatter_mean

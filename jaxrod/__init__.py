@@ -175,6 +175,7 @@ from .sweeps import sweep as sweep
 # plot: figures
 from .plot import plot_equilibria as plot_equilibria
 from .plot import plot_hysteresis as plot_hysteresis
+from .plot import plot_imperfection_sensitivity as plot_imperfection_sensitivity
 from .plot import plot_phase_diagram as plot_phase_diagram
 from .plot import plot_shape as plot_shape
 

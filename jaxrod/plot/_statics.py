@@ -337,3 +337,32 @@ def plot_phase_diagram(ds, path, termination_gaps=None, title=None):
     `{s0: {psi0_deg: (G*_up, G*_down)}}`, one per panel), adds dashed vertical lines.
     **Returns:** `path`."""
     return _save(phase_figure(ds, termination_gaps, title), path)
+
+
+def plot_imperfection_sensitivity(sens, path, title=None):
+    r"""Write the imperfection sensitivity `sens` (a `jaxrod.design.ImperfectionSensitivity`)
+    to `path`: $|\Delta\alpha_c|$ against the amplitude $\epsilon$ on log-log axes, snap up
+    and down, each beside its nominal kind's law $C\epsilon^\beta$ (dashed over the range where
+    it holds, with the fitted $\beta$ and the predicted one in the legend). Amplitudes whose
+    paths are not successful are left out. **Returns:** `path`."""
+    fig = _agg_figure((5.6, 4.2))
+    ax = fig.add_subplot(1, 1, 1)
+    eps = np.asarray(sens.amplitudes, float)
+    for d, name, c in ((sens.up, "up", "tab:red"), (sens.down, "down", "tab:blue")):
+        ax.loglog(eps, d.change_deg, "o-", color=c, label=f"snap {name} (nominal: {d.nominal_kind})")
+        if np.isfinite(d.exponent):
+            lo, hi = d.holds
+            x = np.geomspace(lo, hi, 20)
+            pred = "" if d.predicted is None else f", predicted {d.predicted:.3g}"
+            ax.loglog(x, d.coefficient * x ** d.exponent, "--", color="0.3", linewidth=1.0,
+                      label=f"$C\\epsilon^{{\\beta}}$, $\\beta$ = {d.exponent:.3f}{pred}")
+    unit = "L" if sens.kind == "crease_offset" else "deg"
+    ax.set_xlabel(f"imperfection amplitude ({sens.kind.replace('_', ' ')}, {unit})")
+    ax.set_ylabel(r"$|\Delta\alpha_c|$ (deg)")
+    ax.set_title(title or f"imperfection sensitivity (N = {sens.n})", fontsize=10)
+    ax.legend(fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    return path
+
