@@ -7,7 +7,8 @@ Objectives (`AlphaUp`, `AlphaDown`, `Hysteresis`, `FoldHeight`, `BendingEnergy`,
 design studies (`snap_angle_study`, ...), crease positions and angles as design variables
 (`CreaseParametrization`, `two_crease_study`, `crease_position_study`), and the statistics of
 the snap angles under manufacturing scatter (`Scatter`, `scatter_statistics`, `scatter_mean`) and
-under imperfections (`imperfection_sensitivity`). float64 must be
+under imperfections (`imperfection_sensitivity`), and robust design at a quantile of the scatter
+(`robust_design`). float64 must be
 enabled by the caller.
 """
 
@@ -67,6 +68,9 @@ from ._imperfections import DirectionSensitivity as DirectionSensitivity
 from ._imperfections import imperfect_scene as imperfect_scene
 from ._imperfections import imperfection_sensitivity as imperfection_sensitivity
 from ._imperfections import ImperfectionSensitivity as ImperfectionSensitivity
+from ._robust import robust_design as robust_design
+from ._robust import RobustDesign as RobustDesign
+from ._robust import scatter_quantiles as scatter_quantiles
 from ._scatter import PathStatistics as PathStatistics
 from ._scatter import Scatter as Scatter
 from ._scatter import scatter_mean as scatter_mean

@@ -96,11 +96,13 @@ def _members(nominal, widths, draws):
 
 
 @jit
-def _batch(nominal, widths, draws, n):
-    """`jax.vmap` of `jaxrod.snap_angles` over the members: (their parameters, whether
-    clipped, the `SnapAngles` batch)."""
+def _batch(nominal, widths, draws, n, extrapolate=False):
+    """`jax.vmap` of `jaxrod.snap_angles` (or, with `extrapolate`,
+    `jaxrod.snap_angles_extrapolated`) over the members: (their parameters, whether clipped,
+    the batch of results)."""
     q, clipped = _members(nominal, widths, draws)
-    snaps = jax.vmap(lambda m: jr.snap_angles(design_scene(m[0], m[1], m[2], n)))(q)
+    angles = jr.snap_angles_extrapolated if extrapolate else jr.snap_angles
+    snaps = jax.vmap(lambda m: angles(design_scene(m[0], m[1], m[2], n)))(q)
     return q, clipped, snaps
 
 
@@ -119,16 +121,18 @@ def _checked(scatter, samples, seed, n):
 
 
 def scatter_mean(psi0_deg, gap, s0=0.02, *, scatter: Scatter, samples: int = 256, seed: int = 0,
-                 n: int = 100):
+                 n: int = 100, extrapolate: bool = False):
     r"""The sample means of $\alpha_c$ up and down (rad) over the successful members, a
     differentiable function of the nominal design (`jax.grad` gives the reparametrization
-    estimator of the module docstring; the draws are fixed by `seed`). Returns
+    estimator of the module docstring; the draws are fixed by `seed`; `extrapolate`: each
+    member by `jaxrod.snap_angles_extrapolated`, meshes `n` and 2 `n`). Returns
     `(mean_up, mean_down, num_ok_up, num_ok_down)`."""
     _checked(scatter, samples, seed, n)
     dtype = jnp.result_type(float)
     nominal = jnp.stack([jnp.deg2rad(jnp.asarray(psi0_deg, dtype)), jnp.asarray(gap, dtype),
                          jnp.asarray(s0, dtype)])
-    _, _, r = _batch(nominal, jnp.asarray(scatter.widths, dtype), jnp.asarray(scatter.draws(samples, seed), dtype), n)
+    _, _, r = _batch(nominal, jnp.asarray(scatter.widths, dtype), jnp.asarray(scatter.draws(samples, seed), dtype), n,
+                     bool(extrapolate))
     out = []
     for path in (r.up, r.down):
         ok = path.snaps & (path.result == jr.RESULTS.successful)
@@ -249,12 +253,15 @@ def _path_statistics(path, draws, widths, distribution, levels, before):
 
 
 def scatter_statistics(psi0_deg, gap, s0=0.02, *, scatter: Scatter, samples: int = 256, seed: int = 0,
-                       n: int = 100, levels=(0.1, 0.5, 0.9), before_up=(), before_down=()) -> ScatterStatistics:
+                       n: int = 100, levels=(0.1, 0.5, 0.9), before_up=(), before_down=(),
+                       extrapolate: bool = False) -> ScatterStatistics:
     r"""The statistics of the snap angles of the design (`psi0_deg`, `gap`, `s0`) under
     `scatter`, from `samples` members drawn from `seed`, each `jaxrod.snap_angles` at mesh
     `n`, evaluated as one batch (module docstring). `levels`: the quantiles to report;
     `before_up` / `before_down`: clamp angles $a$ (deg, magnitudes) at which to report
-    $P(|\alpha_c|\le a)$ and its score-function gradient. float64 must be enabled."""
+    $P(|\alpha_c|\le a)$ and its score-function gradient; `extrapolate`: each member by
+    `jaxrod.snap_angles_extrapolated` (meshes `n` and 2 `n`: the continuum's angles, about three
+    times the cost), where the mesh's own error would rival the spread. float64 must be enabled."""
     _nominal(psi0_deg, gap, s0)
     _checked(scatter, samples, seed, n)
     for name, qs in (("levels", levels),):
@@ -269,7 +276,7 @@ def scatter_statistics(psi0_deg, gap, s0=0.02, *, scatter: Scatter, samples: int
     draws = scatter.draws(samples, seed)
     widths = scatter.widths
     nominal = jnp.array([np.deg2rad(float(psi0_deg)), float(gap), float(s0)], dtype)
-    q, clipped, r = _batch(nominal, jnp.asarray(widths, dtype), jnp.asarray(draws, dtype), n)
+    q, clipped, r = _batch(nominal, jnp.asarray(widths, dtype), jnp.asarray(draws, dtype), n, bool(extrapolate))
     up = _path_statistics(r.up, draws, widths, scatter.distribution, levels, before_up)
     down = _path_statistics(r.down, draws, widths, scatter.distribution, levels, before_down)
     ok = int(jr.RESULTS.successful._value)
