@@ -22,6 +22,21 @@ from jaxrod.cli._main import main
     (["design", "--target-alpha-up", "60", "--optimizer", "adam:-1"], "optimizer"),
     (["design", "--target-alpha-up", "60", "--optimizer", "adam:fast"], "optimizer"),
     (["design", "--study", "crease-position", "--optimizer", "adam"], "optimizer"),
+    (["design", "--target-alpha-up", "60", "--scatter", "psi0=10"], "scatter"),
+    (["design", "--target-alpha-up", "60", "--quantile", "0.9", "--scatter", "psi0=10"], "target-alpha-down"),
+    (["design", "--target-alpha-up", "60", "--target-alpha-down", "-70", "--quantile", "0.9"], "scatter"),
+    (["design", "--target-alpha-up", "60", "--target-alpha-down", "-70", "--quantile", "0.9", "--scatter", "psi=10"],
+     "scatter"),
+    (["design", "--target-alpha-up", "60", "--target-alpha-down", "-70", "--quantile", "0.9", "--scatter", "psi0=x"],
+     "scatter"),
+    (["design", "--target-alpha-up", "60", "--target-alpha-down", "-70", "--quantile", "0.9", "--scatter",
+      "psi0=-3"], "psi0_deg"),
+    (["design", "--target-alpha-up", "60", "--target-alpha-down", "-70", "--quantile", "1.5", "--scatter", "psi0=10"],
+     "quantile"),
+    (["design", "--target-alpha-up", "60", "--target-alpha-down", "-70", "--quantile", "0.9", "--scatter", "psi0=10",
+      "--target-hysteresis", "30"], "target-hysteresis"),
+    (["design", "--target-alpha-up", "60", "--target-alpha-down", "-70", "--quantile", "0.9", "--scatter", "psi0=10",
+      "--samples", "2"], "samples"),
 ])
 def test_design_bad_input_is_one_line_exit_2(argv, word, capsys):
     assert main(argv) == 2
@@ -37,6 +52,19 @@ def test_design_cli_json_reaches_targets(capsys):
     assert code == 0 and rec["reached"] is True
     assert abs(rec["alpha_c_up"] - 60) <= 0.1 and abs(rec["alpha_c_down"] + 70) <= 0.1
     assert {"psi0_deg", "gap", "s0", "num_reached", "num_starts"} <= set(rec)
+
+
+@pytest.mark.slow
+def test_design_cli_robust_design(capsys):
+    """`jaxrod design --quantile 0.9 --scatter psi0=10`: the robust design of the nightly
+    library test, through the command line (JSON, exit 0)."""
+    code = main(["design", "--target-alpha-up", "70.5184", "--target-alpha-down", "-74.1698", "--quantile", "0.9",
+                 "--scatter", "psi0=10", "--samples", "32", "--n", "30", "--psi0", "110", "--gap", "0.55",
+                 "--tol", "0.02", "--json"])
+    rec = json.loads(capsys.readouterr().out)
+    assert code == 0 and rec["result"] == "successful", rec
+    assert abs(rec["psi0_deg"] - 120.0) < 0.05 and abs(rec["gap"] - 0.6) < 0.001
+    assert {"quantiles_deg", "nominal_deg", "check_probability", "check_sem"} <= set(rec)
 
 
 @pytest.mark.slow

@@ -262,7 +262,79 @@ def _cmd_design_creases(args):
     return EXIT_OK if ok else EXIT_NOT_CONVERGED
 
 
+def _scatter(text):
+    """`--scatter psi0=DEG[,gap=G][,s0=S][,uniform]` as a `jaxrod.design.Scatter` (InputError
+    naming the option on a bad spec)."""
+    import jaxrod.design as ds
+
+    widths, distribution = {}, "normal"
+    for part in (p.strip() for p in text.split(",") if p.strip()):
+        if part in ("normal", "uniform"):
+            distribution = part
+            continue
+        name, _, value = part.partition("=")
+        if name not in ("psi0", "gap", "s0") or not value:
+            raise InputError(f"scatter: expected psi0=DEG,gap=G,s0=S[,uniform], got {text!r}")
+        try:
+            widths[{"psi0": "psi0_deg"}.get(name, name)] = float(value)
+        except ValueError:
+            raise InputError(f"scatter: {name} must be a number, got {value!r}") from None
+    if not widths:
+        raise InputError(f"scatter: give at least one width (psi0=DEG, gap=G or s0=S), got {text!r}")
+    try:
+        return ds.Scatter(**widths, distribution=distribution)
+    except ValueError as e:
+        raise InputError(f"scatter: {e}") from None
+
+
+def _cmd_design_robust(args):
+    """`--quantile Q --scatter SPEC`: `jaxrod.design.robust_design`, both snap angles at the
+    quantile Q of the scatter, re-checked by an independent Monte Carlo."""
+    if args.target_alpha_up is None or args.target_alpha_down is None:
+        raise InputError("quantile: a robust design needs --target-alpha-up and --target-alpha-down")
+    for flag, given in (("target-hysteresis", args.target_hysteresis is not None),
+                        ("target-speed", args.target_speed is not None), ("study", args.study is not None),
+                        ("crease", bool(args.design_creases)), ("free-s0", args.free_s0), ("bounds", bool(args.bounds)),
+                        ("save", args.save is not None), ("optimizer", args.optimizer.strip().lower() != "lm"),
+                        ("starts", args.starts is not None)):
+        if given:
+            raise InputError(f"{flag}: not used with --quantile (a robust design of the two snap angles)")
+    if args.scatter is None:
+        raise InputError("quantile: give the scatter, e.g. --scatter psi0=10")
+    scatter = _scatter(args.scatter)
+    import jaxrod as jr
+    import jaxrod.design as ds
+
+    start = (90.0 if args.psi0 is None else args.psi0, 0.5 if args.gap is None else args.gap)
+    try:
+        r = ds.robust_design(args.target_alpha_up, args.target_alpha_down, quantile=args.quantile, scatter=scatter,
+                             start=start, s0=args.s0, samples=args.samples, seed=args.seed,
+                             n=60 if args.n is None else args.n, max_steps=args.max_iter,
+                             tol_deg=0.01 if args.tol is None else args.tol, check_n=args.check_n)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    rec = dict(psi0_deg=r.psi0_deg, gap=r.gap, s0=r.s0, quantile=r.quantile, quantiles_deg=r.quantiles.tolist(),
+               targets_deg=[float(r.targets[0]), -float(r.targets[1])], nominal_deg=[r.nominal[0], -r.nominal[1]],
+               num_steps=r.num_steps, check_probability=r.check_probability.tolist(),
+               check_sem=r.check_sem.tolist(), check_members=r.check_ok.tolist(), message=r.message,
+               result=result_name(r.result))
+    if args.json:
+        print(json.dumps(rec))
+    else:
+        print(f"robust design: Psi0 = {r.psi0_deg:.4f} deg, G/L = {r.gap:.5f} ({r.num_steps} steps)")
+        print(f"  {r.quantile:g} quantiles: up {r.quantiles[0]:.4f} deg, down {-r.quantiles[1]:.4f} deg; "
+              f"nominal strip: up {r.nominal[0]:.4f}, down {-r.nominal[1]:.4f}")
+        print(f"  independent check: P(up) = {r.check_probability[0]:.3f} +- {r.check_sem[0]:.3f}, "
+              f"P(down) = {r.check_probability[1]:.3f} +- {r.check_sem[1]:.3f}; result {rec['result']}"
+              + (f" ({r.message})" if r.message else ""))
+    return EXIT_OK if r.result == jr.RESULTS.successful else EXIT_NOT_CONVERGED
+
+
 def _cmd_design(args):
+    if args.quantile is not None:
+        return _cmd_design_robust(args)
+    if args.scatter is not None or args.samples != 64:
+        raise InputError("scatter: only used with --quantile (a robust design)")
     optimizer = _optimizer(args)
     if optimizer != "lm" and (args.study is not None or args.design_creases):
         raise InputError("optimizer: the crease designs (--study, --crease) run their own optimizers; "
@@ -408,6 +480,14 @@ def register(sub):
                         "(benchmarks/results/optimizers.md)")
     p.add_argument("--seed", type=int, default=0, help="random starts seed")
     p.add_argument("--save", metavar="PATH", default=None, help="write PATH.eqx and PATH.json")
+    p.add_argument("--quantile", type=_number, default=None, metavar="Q",
+                   help="robust design: both snap angles at this quantile of --scatter (needs both angle targets; "
+                        "--psi0/--gap give the start, default 90 deg, 0.5)")
+    p.add_argument("--scatter", default=None, metavar="SPEC",
+                   help="the scatter of a robust design: psi0=DEG[,gap=G][,s0=S][,uniform] (standard deviations, or "
+                        "half-widths with uniform)")
+    p.add_argument("--samples", type=int, default=64, metavar="M",
+                   help="members of the scatter in a robust design (default %(default)d)")
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     p.set_defaults(handler=_cmd_design)
 
