@@ -13,7 +13,7 @@ import pytest
 import jaxrod as jr
 import jaxrod.design as jd
 
-N = 40
+N = 26
 
 
 @pytest.mark.parametrize("kind", ["crease_offset", "kink"])
