@@ -23,6 +23,7 @@ from jaxrod.cli._main import main
     (["design", "--target-alpha-up", "60", "--optimizer", "adam:fast"], "optimizer"),
     (["design", "--study", "crease-position", "--optimizer", "adam"], "optimizer"),
     (["design", "--target-alpha-up", "60", "--scatter", "psi0=10"], "scatter"),
+    (["design", "--target-alpha-up", "60", "--samples", "32"], "samples"),
     (["design", "--target-alpha-up", "60", "--quantile", "0.9", "--scatter", "psi0=10"], "target-alpha-down"),
     (["design", "--target-alpha-up", "60", "--target-alpha-down", "-70", "--quantile", "0.9"], "scatter"),
     (["design", "--target-alpha-up", "60", "--target-alpha-down", "-70", "--quantile", "0.9", "--scatter", "psi=10"],

@@ -333,8 +333,10 @@ def _cmd_design_robust(args):
 def _cmd_design(args):
     if args.quantile is not None:
         return _cmd_design_robust(args)
-    if args.scatter is not None or args.samples != 64:
+    if args.scatter is not None:
         raise InputError("scatter: only used with --quantile (a robust design)")
+    if args.samples != 64:
+        raise InputError("samples: only used with --quantile (a robust design)")
     optimizer = _optimizer(args)
     if optimizer != "lm" and (args.study is not None or args.design_creases):
         raise InputError("optimizer: the crease designs (--study, --crease) run their own optimizers; "
