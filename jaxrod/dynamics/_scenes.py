@@ -278,18 +278,13 @@ def snap_dynamics(scene, direction="up", *, kind="brink", nudge=NUDGE, past=1e-3
     names = inspect.signature(check_run_settings).parameters
     check_run_settings(**{k: v for k, v in simulate_kwargs.items() if k in names})
     if kind == "brink":
-        def make():
-            return brink(scene, direction, nudge=nudge, past=past, snap=snap, route=route)
+        start = brink(scene, direction, nudge=nudge, past=past, snap=snap, route=route)
     elif kind == "ramp":
-        def make():
-            return ramp(scene, direction, rate=rate, alpha_start=alpha_start, snap=snap, seed=seed)
+        start = ramp(scene, direction, rate=rate, alpha_start=alpha_start, snap=snap, seed=seed)
     else:
-        def make():
-            return ramp(scene, direction, rate=rate, alpha_start=0.0 if alpha_start is None else alpha_start,
-                        right_only=True, seed=seed)
+        start = ramp(scene, direction, rate=rate, alpha_start=0.0 if alpha_start is None else alpha_start,
+                     right_only=True, seed=seed)
         simulate_kwargs.setdefault("stop_at_snap", False)
     simulate_kwargs.setdefault("direction", _direction(direction))
-
-    start = make()
     traj = simulate(start.scene, start.theta0, start.protocol, **simulate_kwargs)
     return start, traj
