@@ -16,7 +16,7 @@ import jaxrod.design as jd
 N = 26
 
 
-@pytest.mark.parametrize("kind", ["crease_offset", "kink"])
+@pytest.mark.parametrize("kind", ["crease_offset", pytest.param("kink", marks=pytest.mark.slow)])
 def test_zero_amplitude_is_the_nominal_strip(kind):
     nominal = jr.snap_angles(jr.make_scene(60.0, 0.5, n=N))
     imperfect = jr.snap_angles(jd.imperfect_scene(60.0, 0.5, kind, 0.0, n=N))
@@ -30,6 +30,7 @@ def offset():
     return jd.imperfection_sensitivity(60.0, 0.5, "crease_offset", n=N)
 
 
+@pytest.mark.slow  # a batch of snap angles compiled for the imperfections (CI: the fit's unit test below)
 def test_crease_offset_laws(offset):
     """Psi0 = 60 deg, G/L = 0.5: the snap up is a branch point (2/3), the snap down a fold (2);
     every imperfect path is a fold; the fitted laws hold from the smallest amplitude on."""
@@ -43,16 +44,41 @@ def test_crease_offset_laws(offset):
     assert offset.result == jr.RESULTS.successful
 
 
+@pytest.mark.slow
 def test_figure(offset, tmp_path):
     """The log-log figure is written (a PNG with both directions and their laws)."""
     path = jr.plot_imperfection_sensitivity(offset, tmp_path / "imperfection.png")
     assert path.stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_kink_laws():
     s = jd.imperfection_sensitivity(60.0, 0.5, "kink", amplitudes=np.geomspace(1e-3, 1e-1, 5), n=N)
     assert abs(s.up.exponent - 2 / 3) < 0.02 and abs(s.down.exponent - 1.0) < 0.02
     assert s.kind == "kink" and s.up.predicted == pytest.approx(2 / 3) and s.down.predicted == 1.0
+
+
+def test_power_law_fit_of_synthetic_changes():
+    """The fit alone (no solve): changes C eps^(2/3) that leave the law at the largest
+    amplitudes give the exponent, C and the range where the law holds; a path that is not
+    successful breaks the run."""
+    from types import SimpleNamespace
+
+    from jaxrod.design._imperfections import _direction
+
+    eps = np.geomspace(1e-5, 1e-2, 7)
+    change = 2.5 * eps ** (2 / 3) * (1 + np.where(eps > 2e-3, 0.5, 0.0))  # off the law at the last two
+    ok = int(jr.RESULTS.successful._value)
+    path = SimpleNamespace(snaps=np.ones(7, bool), alpha_c=np.radians(77.0 - change), kind=np.ones(7, int),
+                           result=SimpleNamespace(_value=np.full(7, ok)))
+    nominal = SimpleNamespace(snaps=True, alpha_c=np.radians(77.0), kind=2, result=SimpleNamespace(_value=ok))
+    d = _direction(path, nominal, "crease_offset", eps, 0.05)
+    assert d.nominal_kind == "branch_point" and d.predicted == pytest.approx(2 / 3)
+    assert d.exponent == pytest.approx(2 / 3, abs=1e-9) and d.coefficient == pytest.approx(2.5, rel=1e-9)
+    assert d.holds == (eps[0], eps[4])
+    bad = SimpleNamespace(**{**vars(path), "result": SimpleNamespace(_value=np.array([ok, ok, 99, ok, ok, ok, ok]))})
+    d = _direction(bad, nominal, "crease_offset", eps, 0.05)
+    assert np.isnan(d.alpha_deg[2]) and d.holds == (eps[0], eps[1])  # two runs of one step: the smaller
 
 
 @pytest.mark.parametrize("kwargs, match", [

@@ -26,6 +26,7 @@ def test_sample_quantile_is_numpys_over_the_successful_members():
     np.testing.assert_allclose(d, np.quantile(v[ok], 0.9), rtol=1e-12)
 
 
+@pytest.mark.slow  # a batched Jacobian compiled (CI: the sample quantile's own derivative above)
 def test_quantiles_jacobian_matches_central_differences():
     """The quantiles of a small scatter (N = 16, 8 members, one mesh) differentiated in the
     nominal (Psi0, G): forward mode against central differences on the same draws."""
