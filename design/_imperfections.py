@@ -35,7 +35,8 @@ import numpy as np
 import jaxrod as jr
 from jaxrod._compile import jit
 from jaxrod._misc import check_int, check_number
-from jaxrod.results import result_from_name, result_name
+
+from ._scatter import first_failure
 
 IMPERFECTIONS = ("crease_offset", "kink")
 KINK_POSITION = 0.25
@@ -55,7 +56,11 @@ def imperfect_scene(psi0_deg, gap, kind: str, amplitude=0.0, *, s0: float = 0.02
     if kind == "kink":
         creases.append((KINK_POSITION, 180.0, float(s0)))
     base = jr.make_scene(180.0, float(gap), s0=float(s0), n=n, creases=creases)
-    amplitude = jnp.asarray(amplitude, jnp.result_type(float))
+    return _with_amplitude(base, kind, jnp.asarray(amplitude, jnp.result_type(float)))
+
+
+def _with_amplitude(base, kind, amplitude):
+    """`base` (the strip at zero amplitude) with the imperfection `kind` of `amplitude`."""
     if kind == "crease_offset":
         return eqx.tree_at(lambda s: s.strip.creases.positions, base,
                            base.strip.creases.positions.at[0].add(amplitude))
@@ -65,14 +70,7 @@ def imperfect_scene(psi0_deg, gap, kind: str, amplitude=0.0, *, s0: float = 0.02
 
 @jit
 def _batch(base, amplitudes, kind):
-    def one(a):
-        if kind == "crease_offset":
-            sc = eqx.tree_at(lambda s: s.strip.creases.positions, base, base.strip.creases.positions.at[0].add(a))
-        else:
-            sc = eqx.tree_at(lambda s: s.strip.creases.angles, base, base.strip.creases.angles.at[1].add(-jnp.deg2rad(a)))
-        return jr.snap_angles(sc)
-
-    return jax.vmap(one)(amplitudes)
+    return jax.vmap(lambda a: jr.snap_angles(_with_amplitude(base, kind, a)))(amplitudes)
 
 
 class DirectionSensitivity(eqx.Module):
@@ -179,8 +177,5 @@ def imperfection_sensitivity(psi0_deg, gap, kind: str = "crease_offset", amplitu
     take = lambda tree, sl: jax.tree.map(lambda x: x[sl], tree)  # noqa: E731
     up = _direction(take(r.up, slice(1, None)), take(r.up, 0), kind, amplitudes, tolerance)
     down = _direction(take(r.down, slice(1, None)), take(r.down, 0), kind, amplitudes, tolerance)
-    ok = int(jr.RESULTS.successful._value)
-    codes = np.concatenate([np.asarray(r.up.result._value), np.asarray(r.down.result._value)])
-    bad = codes[codes != ok]
-    result = jr.RESULTS.successful if bad.size == 0 else result_from_name(result_name(int(bad[0])))
+    result = first_failure(r.up.result._value, r.down.result._value)
     return ImperfectionSensitivity(up=up, down=down, kind=kind, amplitudes=amplitudes, n=n, result=result)

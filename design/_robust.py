@@ -34,7 +34,7 @@ from jaxrod._misc import check_int, check_number
 from jaxrod.results import result_from_name
 
 from ._critical import design_scene
-from ._scatter import DOMAIN, Scatter, _batch
+from ._scatter import Scatter, _batch, _members
 
 BIG = 1e3
 """Stands in (rad) for a member that is not successful when the quantile's members are sorted:
@@ -182,14 +182,11 @@ def robust_design(target_up_deg, target_down_deg, *, quantile: float = 0.9, scat
 
 def _check(psi0_deg, gap, s0, scatter, targets, *, samples, seed, n, angles):
     """The independent Monte Carlo: single calls of `angles` on fresh draws."""
-    draws = scatter.draws(samples, seed)
-    widths = np.array([scatter.psi0_deg, scatter.gap, scatter.s0])
-    nominal = np.array([psi0_deg, gap, s0])
-    lo, hi = np.array(DOMAIN).T
+    members, _ = _members(jnp.array([math.radians(psi0_deg), gap, s0]), jnp.asarray(scatter.widths),
+                          jnp.asarray(scatter.draws(samples, seed)))
     hits, oks = np.zeros(2), np.zeros(2)
-    for d in draws:
-        p = np.clip(nominal + widths * d, lo, hi)
-        r = angles(design_scene(math.radians(p[0]), p[1], p[2], n))
+    for p in np.asarray(members):
+        r = angles(design_scene(p[0], p[1], p[2], n))
         for j, (path, sign) in enumerate(((r.up, 1.0), (r.down, -1.0))):
             if path.result == jr.RESULTS.successful:
                 oks[j] += 1

@@ -206,6 +206,14 @@ class ScatterStatistics(eqx.Module):
     result: jr.RESULTS
 
 
+def first_failure(*codes):
+    """`successful` where every value of the `jaxrod.RESULTS` code arrays `codes` is, else the
+    code of the first value that is not (in the order given)."""
+    values = np.concatenate([np.ravel(np.asarray(c)) for c in codes])
+    bad = values[values != int(jr.RESULTS.successful._value)]
+    return jr.RESULTS.successful if bad.size == 0 else result_from_name(result_name(int(bad[0])))
+
+
 def _order_interval(sorted_vals, q):
     """The q-quantile of sorted values and the order statistics of its 95 % interval."""
     m = len(sorted_vals)
@@ -279,9 +287,7 @@ def scatter_statistics(psi0_deg, gap, s0=0.02, *, scatter: Scatter, samples: int
     q, clipped, r = _batch(nominal, jnp.asarray(widths, dtype), jnp.asarray(draws, dtype), n, bool(extrapolate))
     up = _path_statistics(r.up, draws, widths, scatter.distribution, levels, before_up)
     down = _path_statistics(r.down, draws, widths, scatter.distribution, levels, before_down)
-    ok = int(jr.RESULTS.successful._value)
-    bad = np.concatenate([up.codes[up.codes != ok], down.codes[down.codes != ok]])
-    result = jr.RESULTS.successful if bad.size == 0 else result_from_name(result_name(int(bad[0])))
+    result = first_failure(up.codes, down.codes)
     members = np.asarray(q).copy()
     members[:, 0] = np.rad2deg(members[:, 0])
     return ScatterStatistics(up=up, down=down, members=members, clipped=np.asarray(clipped), scatter=scatter,
