@@ -1,20 +1,22 @@
 r"""Imperfections: how far a small asymmetry of the strip moves its snap angles.
 
-Two imperfections of a strip with one central crease $(\Psi_0, s_0)$, each of amplitude
+Three imperfections of a strip with one central crease $(\Psi_0, s_0)$, each of amplitude
 $\epsilon$, built with `jaxrod.Creases` (the main crease written as a crease at $L/2$, the
 strip otherwise flat):
 
 - `"crease_offset"`: the crease at $L/2+\epsilon$ ($\epsilon$ in units of $L$);
 - `"kink"`: a second, weak crease of fold angle $180^\circ-\epsilon$ at $L/4$ ($\epsilon$ in
-  degrees): a small natural-curvature asymmetry.
+  degrees): a small natural-curvature asymmetry;
+- `"clamp_misalignment"`: clamps that differ by $\alpha_L-\alpha_R=\epsilon$ (degrees) while
+  they turn together ([`jaxrod.SymmetricAlpha`][]; $\alpha$ is their mean).
 
-At $\epsilon=0$ both are the nominal (mirror-symmetric) strip. Where its snap is a *branch
+At $\epsilon=0$ each is the nominal (mirror-symmetric) strip. Where its snap is a *branch
 point* (the mode that goes unstable is mirror-asymmetric), an asymmetry of size $\epsilon$
 unfolds the bifurcation into a fold and moves the snap angle like
 $|\Delta\alpha_c|=C\epsilon^{2/3}$ (Koiter's law for an asymmetric imperfection of a
 symmetric bifurcation). Where it is a *fold* (a symmetric mode), the snap angle moves
-smoothly: like $\epsilon^2$ for the crease offset, whose sign is the mirror image
-($\alpha_c(\epsilon)=\alpha_c(-\epsilon)$), like $\epsilon$ for the kink.
+smoothly: like $\epsilon^2$ for the crease offset and the misalignment, whose sign is the
+mirror image ($\alpha_c(\epsilon)=\alpha_c(-\epsilon)$), like $\epsilon$ for the kink.
 
 [`imperfection_sensitivity`][] computes $\alpha_c$ at the given amplitudes (one batch), the
 local exponents $d\log|\Delta\alpha_c|/d\log\epsilon$ between consecutive amplitudes, and a
@@ -38,12 +40,13 @@ from jaxrod._misc import check_int, check_number
 
 from ._scatter import first_failure
 
-IMPERFECTIONS = ("crease_offset", "kink")
+IMPERFECTIONS = ("crease_offset", "kink", "clamp_misalignment")
 KINK_POSITION = 0.25
 """Where the kink imperfection's weak crease sits (units of L)."""
 
 PREDICTED = {("crease_offset", "branch_point"): 2.0 / 3.0, ("crease_offset", "fold"): 2.0,
-             ("kink", "branch_point"): 2.0 / 3.0, ("kink", "fold"): 1.0}
+             ("kink", "branch_point"): 2.0 / 3.0, ("kink", "fold"): 1.0,
+             ("clamp_misalignment", "branch_point"): 2.0 / 3.0, ("clamp_misalignment", "fold"): 2.0}
 """The exponent beta of |d alpha_c| = C eps^beta by imperfection and nominal kind."""
 
 
@@ -64,6 +67,10 @@ def _with_amplitude(base, kind, amplitude):
     if kind == "crease_offset":
         return eqx.tree_at(lambda s: s.strip.creases.positions, base,
                            base.strip.creases.positions.at[0].add(amplitude))
+    if kind == "clamp_misalignment":
+        half = 0.5 * jnp.deg2rad(amplitude)
+        return eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), base,
+                           (base.clamps.alpha_left + half, base.clamps.alpha_right - half))
     return eqx.tree_at(lambda s: s.strip.creases.angles, base,
                        base.strip.creases.angles.at[1].add(-jnp.deg2rad(amplitude)))
 
@@ -153,7 +160,7 @@ def imperfection_sensitivity(psi0_deg, gap, kind: str = "crease_offset", amplitu
                              n: int = 100, tolerance: float = 0.05) -> ImperfectionSensitivity:
     r"""The snap angles of the strip (`psi0_deg`, `gap`, `s0`, mesh `n`) with the imperfection
     `kind` at each of `amplitudes` (increasing, positive; default 7 from 1e-5 to 1e-2: L for
-    the crease offset, deg for the kink), beside the nominal strip, with the power law of the
+    the crease offset, deg for the kink and the misalignment), beside the nominal strip, with the power law of the
     change and the range where it holds (module docstring; `tolerance` the relative deviation
     of a local exponent from the prediction still counted as holding). float64 must be enabled."""
     check_number("psi0_deg", psi0_deg, lo=0.0, hi=180.0, hi_open=True)
@@ -170,6 +177,8 @@ def imperfection_sensitivity(psi0_deg, gap, kind: str = "crease_offset", amplitu
         raise ValueError(f"amplitudes: a crease offset must stay below 0.25 L, got {amplitudes[-1]!r}")
     if kind == "kink" and amplitudes[-1] >= 180.0:
         raise ValueError(f"amplitudes: a kink must stay below 180 deg, got {amplitudes[-1]!r}")
+    if kind == "clamp_misalignment" and amplitudes[-1] >= 90.0:
+        raise ValueError(f"amplitudes: a clamp misalignment must stay below 90 deg, got {amplitudes[-1]!r}")
     if jnp.result_type(float) != jnp.float64:
         raise ValueError("imperfection_sensitivity needs float64: jax.config.update('jax_enable_x64', True)")
     base = imperfect_scene(psi0_deg, gap, kind, 0.0, s0=s0, n=n)

@@ -34,7 +34,7 @@ from jaxrod._misc import check_int, check_number
 from jaxrod.results import result_from_name
 
 from ._critical import design_scene
-from ._scatter import Scatter, _batch, _members
+from ._scatter import Scatter, _batch, _members, member_scene
 
 BIG = 1e3
 """Stands in (rad) for a member that is not successful when the quantile's members are sorted:
@@ -186,7 +186,7 @@ def _check(psi0_deg, gap, s0, scatter, targets, *, samples, seed, n, angles):
                           jnp.asarray(scatter.draws(samples, seed)))
     hits, oks = np.zeros(2), np.zeros(2)
     for p in np.asarray(members):
-        r = angles(design_scene(p[0], p[1], p[2], n))
+        r = angles(member_scene(p, n))
         for j, (path, sign) in enumerate(((r.up, 1.0), (r.down, -1.0))):
             if path.result == jr.RESULTS.successful:
                 oks[j] += 1

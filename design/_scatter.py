@@ -1,8 +1,10 @@
 r"""Manufacturing scatter: the statistics of a design's snap angles when its fold angle, gap
-and fold width scatter about their nominal values.
+and fold width scatter about their nominal values, and its clamps are misaligned.
 
 A strip made by hand is never the nominal one. A [`Scatter`][] gives the deviations of the
-parameters $p=(\Psi_0, G/L, s_0/L)$ from the nominal design $\bar p$ as independent draws,
+parameters $p=(\Psi_0, G/L, s_0/L, \delta)$ from the nominal design $\bar p$ (whose clamp
+misalignment $\delta=\alpha_L-\alpha_R$ is 0; both clamps turn together about it, see
+`jaxrod.SymmetricAlpha`) as independent draws,
 
 $$p=\bar p+\sigma\odot\varepsilon,\quad\varepsilon\sim\mathcal N(0,I)\quad(\text{"normal"},\ \sigma\ \text{the standard deviations}),$$
 $$p=\bar p+w\odot u,\quad u\sim\mathcal U(-1,1)\quad(\text{"uniform"},\ w\ \text{the half-widths: "}\pm10\text{ deg"}),$$
@@ -50,8 +52,9 @@ from jaxrod.results import result_from_name, result_name
 
 from ._critical import design_scene
 
-DOMAIN = ((1.0, 180.0), (0.01, 0.99), (1e-3, 0.25))
-"""Where a sampled member's (Psi0 in deg, G/L, s0/L) is clipped to: the model's domain."""
+DOMAIN = ((1.0, 180.0), (0.01, 0.99), (1e-3, 0.25), (-45.0, 45.0))
+"""Where a sampled member's (Psi0 in deg, G/L, s0/L, misalignment in deg) is clipped to: the
+model's domain."""
 
 Z95 = 1.959963984540054
 """The standard normal's 97.5 % point: the half-width of a 95 % interval in standard errors."""
@@ -59,40 +62,53 @@ Z95 = 1.959963984540054
 
 class Scatter(eqx.Module):
     """The scatter of a design's parameters (module docstring): `psi0_deg` (deg), `gap` and
-    `s0` (units of L) are standard deviations for `distribution="normal"`, half-widths for
+    `s0` (units of L), `misalignment_deg` (deg, the clamps' difference $\alpha_L-\alpha_R$
+    about its nominal 0) are standard deviations for `distribution="normal"`, half-widths for
     `"uniform"`. Zero (the default) keeps a parameter at its nominal value."""
 
     psi0_deg: float = 0.0
     gap: float = 0.0
     s0: float = 0.0
     distribution: str = eqx.field(static=True, default="normal")
+    misalignment_deg: float = 0.0
 
     def __check_init__(self):
-        for name in ("psi0_deg", "gap", "s0"):
+        for name in ("psi0_deg", "gap", "s0", "misalignment_deg"):
             check_number(name, getattr(self, name), lo=0.0, lo_open=False)
         if self.distribution not in ("normal", "uniform"):
             raise ValueError(f"distribution must be 'normal' or 'uniform', got {self.distribution!r}")
 
     @property
     def widths(self) -> np.ndarray:
-        """(Psi0 in rad, G/L, s0/L): the standard deviations or half-widths."""
-        return np.array([np.deg2rad(float(self.psi0_deg)), float(self.gap), float(self.s0)])
+        """(Psi0 in rad, G/L, s0/L, misalignment in rad): the standard deviations or half-widths."""
+        return np.array([np.deg2rad(float(self.psi0_deg)), float(self.gap), float(self.s0),
+                         np.deg2rad(float(self.misalignment_deg))])
 
     def draws(self, samples: int, seed: int = 0) -> np.ndarray:
-        """(`samples`, 3) standard draws, N(0, 1) or U(-1, 1), from `seed` (numpy's PCG64)."""
+        """(`samples`, 4) standard draws, N(0, 1) or U(-1, 1), from `seed` (numpy's PCG64): the
+        design's three columns first, then the misalignment's (so that a seed's design draws do
+        not depend on whether the clamps scatter)."""
         rng = np.random.default_rng(seed)
         if self.distribution == "normal":
-            return rng.standard_normal((samples, 3))
-        return rng.uniform(-1.0, 1.0, (samples, 3))
+            return np.concatenate([rng.standard_normal((samples, 3)), rng.standard_normal((samples, 1))], axis=1)
+        return np.concatenate([rng.uniform(-1.0, 1.0, (samples, 3)), rng.uniform(-1.0, 1.0, (samples, 1))], axis=1)
 
 
 def _members(nominal, widths, draws):
-    """The members' (Psi0 in rad, G/L, s0/L), clipped into `DOMAIN`, and which were clipped."""
-    lo = jnp.array([np.deg2rad(DOMAIN[0][0]), DOMAIN[1][0], DOMAIN[2][0]])
-    hi = jnp.array([np.deg2rad(DOMAIN[0][1]), DOMAIN[1][1], DOMAIN[2][1]])
+    """The members' (Psi0 in rad, G/L, s0/L, misalignment in rad), clipped into `DOMAIN`, and
+    which were clipped. `nominal`: the design's (Psi0, G/L, s0/L); its misalignment is 0."""
+    nominal = jnp.concatenate([nominal, jnp.zeros(1, nominal.dtype)])
+    lo = jnp.array([np.deg2rad(DOMAIN[0][0]), DOMAIN[1][0], DOMAIN[2][0], np.deg2rad(DOMAIN[3][0])])
+    hi = jnp.array([np.deg2rad(DOMAIN[0][1]), DOMAIN[1][1], DOMAIN[2][1], np.deg2rad(DOMAIN[3][1])])
     p = nominal[None, :] + widths[None, :] * draws
     q = jnp.clip(p, lo, hi)
     return q, jnp.any(q != p, axis=1)
+
+
+def member_scene(m, n):
+    r"""The scene of a member `m` = (Psi0 in rad, G/L, s0/L, misalignment in rad) at mesh `n`:
+    the design's scene with its clamps at $\pm\delta/2$ ($\alpha=0$ about the misalignment)."""
+    return jr.SymmetricAlpha(m[3]).set(design_scene(m[0], m[1], m[2], n), 0.0)
 
 
 @jit
@@ -102,7 +118,7 @@ def _batch(nominal, widths, draws, n, extrapolate=False):
     the batch of results)."""
     q, clipped = _members(nominal, widths, draws)
     angles = jr.snap_angles_extrapolated if extrapolate else jr.snap_angles
-    snaps = jax.vmap(lambda m: angles(design_scene(m[0], m[1], m[2], n)))(q)
+    snaps = jax.vmap(lambda m: angles(member_scene(m, n)))(q)
     return q, clipped, snaps
 
 
@@ -188,7 +204,7 @@ class PathStatistics(eqx.Module):
 
 class ScatterStatistics(eqx.Module):
     """What [`scatter_statistics`][] returns: `up` and `down` ([`PathStatistics`][]), the
-    members' parameters `members` (M, 3: Psi0 in deg, G/L, s0/L), `clipped` (M,) those moved
+    members' parameters `members` (M, 4: Psi0 in deg, G/L, s0/L, misalignment in deg), `clipped` (M,) those moved
     into `DOMAIN`, the `scatter`, `samples`, `seed` and mesh `n`.
 
     `result` (a `jaxrod.RESULTS` code): `successful` where every member of both directions
@@ -244,7 +260,8 @@ def _path_statistics(path, draws, widths, distribution, levels, before):
     grads, gsems = [], []
     for a in before:
         if distribution == "normal" and m_ok > 1:
-            g, s = score_gradient(snaps[ok] & (np.abs(alpha[ok]) <= a), draws[ok], widths)
+            # with respect to the design (Psi0, G/L, s0/L); the nominal misalignment is not one
+            g, s = score_gradient(snaps[ok] & (np.abs(alpha[ok]) <= a), draws[ok][:, :3], widths[:3])
             g, s = g * np.array([np.pi / 180, 1, 1]), s * np.array([np.pi / 180, 1, 1])  # per deg of Psi0
         else:
             g = s = np.full(3, np.nan)
@@ -289,7 +306,7 @@ def scatter_statistics(psi0_deg, gap, s0=0.02, *, scatter: Scatter, samples: int
     down = _path_statistics(r.down, draws, widths, scatter.distribution, levels, before_down)
     result = first_failure(up.codes, down.codes)
     members = np.asarray(q).copy()
-    members[:, 0] = np.rad2deg(members[:, 0])
+    members[:, [0, 3]] = np.rad2deg(members[:, [0, 3]])
     return ScatterStatistics(up=up, down=down, members=members, clipped=np.asarray(clipped), scatter=scatter,
                              samples=samples, seed=seed, n=n, result=result)
 

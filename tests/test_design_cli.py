@@ -36,6 +36,8 @@ from jaxrod.cli._main import main
      "quantile"),
     (["design", "--target-alpha-up", "60", "--target-alpha-down", "-70", "--quantile", "0.9", "--scatter", "psi0=10",
       "--target-hysteresis", "30"], "target-hysteresis"),
+    (["design", "--target-alpha-up", "60", "--target-alpha-down", "-70", "--quantile", "0.9", "--scatter",
+      "misalignment=-1"], "misalignment_deg"),
     (["design", "--target-alpha-up", "60", "--target-alpha-down", "-70", "--quantile", "0.9", "--scatter", "psi0=10",
       "--samples", "2"], "samples"),
 ])
@@ -43,6 +45,16 @@ def test_design_bad_input_is_one_line_exit_2(argv, word, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and err.startswith("jaxrod: error:") and word in err and "Traceback" not in err
+
+
+def test_scatter_spec_is_parsed():
+    """`--scatter` names every field of `jaxrod.design.Scatter`, the misalignment included."""
+    import jaxrod.design as jd
+    from jaxrod.cli._design import _scatter
+
+    assert _scatter("psi0=10,gap=0.02,s0=0.005,misalignment=0.5,uniform") == jd.Scatter(
+        psi0_deg=10.0, gap=0.02, s0=0.005, misalignment_deg=0.5, distribution="uniform")
+    assert _scatter("misalignment=1") == jd.Scatter(misalignment_deg=1.0)
 
 
 @pytest.mark.slow

@@ -1,7 +1,7 @@
 """Imperfection sensitivity (`jaxrod.design._imperfections`): the imperfect strip at zero
 amplitude is the nominal one, and the snap angle moves by the laws of the nominal kind: like
 eps^(2/3) at a branch point (Koiter), eps^2 at a fold for the crease offset (whose sign is
-the mirror image), eps at a fold for the kink."""
+the mirror image) and for a clamp misalignment, eps at a fold for the kink."""
 
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ import jaxrod.design as jd
 N = 26
 
 
-@pytest.mark.parametrize("kind", ["crease_offset", pytest.param("kink", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("kind", ["crease_offset", pytest.param("kink", marks=pytest.mark.slow),
+                                  pytest.param("clamp_misalignment", marks=pytest.mark.slow)])
 def test_zero_amplitude_is_the_nominal_strip(kind):
     nominal = jr.snap_angles(jr.make_scene(60.0, 0.5, n=N))
     imperfect = jr.snap_angles(jd.imperfect_scene(60.0, 0.5, kind, 0.0, n=N))
@@ -58,6 +59,58 @@ def test_kink_laws():
     assert s.kind == "kink" and s.up.predicted == pytest.approx(2 / 3) and s.down.predicted == 1.0
 
 
+def test_symmetric_alpha_keeps_a_misalignment():
+    """`SymmetricAlpha(delta)` turns both clamps about the misalignment: alpha_L - alpha_R =
+    delta, their mean alpha; `for_scene` reads delta from the scene (no solve)."""
+    import jax.numpy as jnp
+
+    sc = jr.make_scene(60.0, 0.5, 3.0, alpha_right_deg=1.0, n=N)
+    p = jr.SymmetricAlpha.for_scene(sc)
+    assert math.degrees(float(p.misalignment)) == pytest.approx(2.0)
+    at = p.set(sc, jnp.deg2rad(10.0))
+    assert math.degrees(float(at.clamps.alpha_left)) == pytest.approx(11.0)
+    assert math.degrees(float(at.clamps.alpha_right)) == pytest.approx(9.0)
+    assert math.degrees(float(p.get(at))) == pytest.approx(10.0)
+    plain = jr.SymmetricAlpha().set(sc, 0.25)
+    assert float(plain.clamps.alpha_left) == float(plain.clamps.alpha_right) == 0.25
+
+
+def test_clamp_misalignment_is_mirror_even():
+    """A misalignment +eps is the mirror image of -eps: the same snap angles to round-off; the
+    branch point of the nominal snap up unfolds into a fold that comes earlier; only the clamps'
+    difference matters (a scene built with clamp angles 3 and 2 deg is the 1 deg misalignment)."""
+    plus = jr.snap_angles(jd.imperfect_scene(60.0, 0.5, "clamp_misalignment", 1.0, n=N))
+    minus = jr.snap_angles(jd.imperfect_scene(60.0, 0.5, "clamp_misalignment", -1.0, n=N))
+    built = jr.snap_angles(jr.make_scene(60.0, 0.5, 3.0, alpha_right_deg=2.0, n=N))
+    nominal = jr.snap_angles(jr.make_scene(60.0, 0.5, n=N))
+    for a, b, c in ((plus.up, minus.up, built.up), (plus.down, minus.down, built.down)):
+        assert a.result == b.result == c.result == jr.RESULTS.successful
+        np.testing.assert_allclose(float(a.alpha_c), float(b.alpha_c), rtol=0, atol=1e-10)
+        np.testing.assert_allclose(float(a.alpha_c), float(c.alpha_c), rtol=0, atol=1e-10)
+    assert jr.KIND_NAMES[int(nominal.up.kind)] == "branch_point" and jr.KIND_NAMES[int(plus.up.kind)] == "fold"
+    assert 0.5 < math.degrees(float(nominal.up.alpha_c - plus.up.alpha_c)) < 5.0
+
+
+@pytest.mark.slow  # a batch of snap angles compiled for the imperfections
+def test_clamp_misalignment_laws():
+    """The up branch point unfolds like eps^(2/3), the down fold moves like eps^2 (mirror-even)."""
+    s = jd.imperfection_sensitivity(60.0, 0.5, "clamp_misalignment", n=N)
+    assert (s.up.nominal_kind, s.down.nominal_kind) == ("branch_point", "fold")
+    assert abs(s.up.exponent - 2 / 3) < 0.02 and abs(s.down.exponent - 2.0) < 0.02
+    assert s.up.holds[0] == s.amplitudes[0]
+    assert s.result == jr.RESULTS.successful
+
+
+def test_brink_keeps_the_misalignment():
+    """The brink's clamps (scene and protocol) turn about the scene's misalignment."""
+    sc = jd.imperfect_scene(60.0, 0.5, "clamp_misalignment", 1.0, n=N)
+    start = jr.brink(sc, "up")
+    assert math.degrees(float(start.scene.clamps.alpha_left - start.scene.clamps.alpha_right)) == pytest.approx(1.0)
+    assert math.degrees(float(start.protocol.alpha_left0 - start.protocol.alpha_right0)) == pytest.approx(1.0)
+    mean = 0.5 * (start.protocol.alpha_left0 + start.protocol.alpha_right0)
+    assert float(mean) == pytest.approx(float(start.alpha_c) + 1e-3, abs=1e-12)
+
+
 def test_power_law_fit_of_synthetic_changes():
     """The fit alone (no solve): changes C eps^(2/3) that leave the law at the largest
     amplitudes give the exponent, C and the range where the law holds; a path that is not
@@ -86,6 +139,7 @@ def test_power_law_fit_of_synthetic_changes():
     (dict(amplitudes=[1e-3]), "amplitudes"),
     (dict(amplitudes=[1e-2, 1e-3]), "amplitudes"),
     (dict(amplitudes=[1e-3, 0.3]), "amplitudes"),
+    (dict(kind="clamp_misalignment", amplitudes=[1.0, 90.0]), "amplitudes"),
     (dict(gap=1.5), "gap"),
     (dict(tolerance=-1.0), "tolerance"),
 ])

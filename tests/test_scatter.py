@@ -18,7 +18,7 @@ from jaxrod.design._critical import design_scene
 from jaxrod.design._scatter import _order_interval
 
 N = 24
-SCATTER = jd.Scatter(psi0_deg=10.0, gap=0.03)
+SCATTER = jd.Scatter(psi0_deg=10.0, gap=0.03, misalignment_deg=1.0)
 
 
 @pytest.fixture(scope="module")
@@ -28,13 +28,16 @@ def stats():
 
 
 def _single(member):
-    psi_deg, gap, s0 = member
-    return jr.snap_angles(design_scene(math.radians(psi_deg), gap, s0, N))
+    """A member (Psi0 deg, G/L, s0/L, misalignment deg) by a single call on a scene built by
+    `jr.make_scene` with its clamps at +-misalignment/2."""
+    psi_deg, gap, s0, mis = member
+    return jr.snap_angles(jr.make_scene(psi_deg, gap, mis / 2, alpha_right_deg=-mis / 2, s0=s0, n=N))
 
 
 def test_members_equal_their_single_calls(stats):
     """A member of the batch is its single call: the same angles (to 1e-9 deg) and codes."""
-    assert stats.members.shape == (24, 3) and not stats.clipped.any()
+    assert stats.members.shape == (24, 4) and not stats.clipped.any()
+    np.testing.assert_allclose(stats.members[:, 3], 1.0 * SCATTER.draws(24, 0)[:, 3])
     for m in (0, 7, 23):
         r = _single(stats.members[m])
         for path, st in ((r.up, stats.up), (r.down, stats.down)):
@@ -61,8 +64,8 @@ def test_statistics_agree_with_an_independent_loop(stats):
     """An independent sample (another seed), each member a single call in a Python loop: the
     means differ by less than 4 combined standard errors."""
     draws = SCATTER.draws(24, seed=1)
-    nominal = np.array([60.0, 0.5, 0.02])
-    widths = np.array([10.0, 0.03, 0.0])
+    nominal = np.array([60.0, 0.5, 0.02, 0.0])
+    widths = np.array([10.0, 0.03, 0.0, 1.0])
     up, down = [], []
     for d in draws:
         r = _single(nominal + widths * d)
@@ -155,6 +158,7 @@ def test_bad_input_names_its_parameter(kwargs, match):
     (dict(psi0_deg=-1.0), "psi0_deg"),
     (dict(gap=float("nan")), "gap"),
     (dict(distribution="cauchy"), "distribution"),
+    (dict(misalignment_deg=-0.5), "misalignment_deg"),
 ])
 def test_bad_scatter_names_its_field(kwargs, match):
     with pytest.raises(ValueError, match=match):

@@ -66,13 +66,27 @@ class AbstractParameter(eqx.Module):
 
 
 class SymmetricAlpha(AbstractParameter):
-    r"""Both clamp angles, $\alpha_L=\alpha_R=\alpha$ (radians)."""
+    r"""Both clamps turned together by $\alpha$ (radians) about a fixed misalignment
+    $\delta$ = `misalignment` (radians, default 0):
+    $\alpha_L=\alpha+\delta/2$, $\alpha_R=\alpha-\delta/2$, so that $\alpha$ is the mean clamp
+    angle and $\alpha_L-\alpha_R=\delta$. With $\delta=0$ (the paper's symmetric actuation)
+    $\alpha_L=\alpha_R=\alpha$. [`for_scene`][jaxrod.SymmetricAlpha.for_scene] takes
+    $\delta$ from a scene's clamps."""
+
+    misalignment: float | jax.Array = 0.0
+
+    @classmethod
+    def for_scene(cls, scene) -> "SymmetricAlpha":
+        """The actuation that keeps `scene`'s clamp misalignment $\alpha_L-\alpha_R$."""
+        return cls(jnp.asarray(scene.clamps.alpha_left) - jnp.asarray(scene.clamps.alpha_right))
 
     def get(self, scene):
-        return scene.clamps.alpha_left
+        return 0.5 * (scene.clamps.alpha_left + scene.clamps.alpha_right)
 
     def set(self, scene, value):
-        return eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (value, value))
+        half = 0.5 * self.misalignment
+        return eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene,
+                           (value + half, value - half))
 
 
 class LeftAlpha(AbstractParameter):
@@ -291,9 +305,10 @@ def _check_bounds(name, bounds):
         raise ValueError(f"{name} must be (lo, hi) with lo < hi, got {bounds!r}")
 
 
-def _continuation_machine(static, parameter, settings, tol, stop_on_instability):
-    r"""`continue_branch`'s loop as a machine (`jaxrod._lanes`): inputs `(arrays, theta0,
-    force0, lo, hi, direction)`, the scene's arrays (`static` its other leaves), the start
+def _continuation_machine(static, settings, tol, stop_on_instability):
+    r"""`continue_branch`'s loop as a machine (`jaxrod._lanes`): inputs `((arrays, p_arrays),
+    theta0, force0, lo, hi, direction)`, the scene's and the parameter's arrays (`static` the
+    pair of their other leaves), the start
     state, the bounds and the start direction (+1 or -1); result `(buffers, count, stop)`. One pass of the loop is one corrector iteration
     (the residual at the iterate, and where it is above tolerance the Newton step on the
     bordered system of the module docstring); the pass whose iteration decides the step
@@ -305,8 +320,9 @@ def _continuation_machine(static, parameter, settings, tol, stop_on_instability)
     M = settings.max_points
 
     def unpack(x):
-        arrays, t0, m0, lo, hi, _ = x
-        scene = eqx.combine(arrays, static)
+        (arrays, p_arrays), t0, m0, lo, hi, _ = x
+        scene = eqx.combine(arrays, static[0])
+        parameter = eqx.combine(p_arrays, static[1])
         F, F_lam, Kf = _pieces(scene, parameter)
         disc = _discretization(scene, parameter)
         w = discretize(scene).h
@@ -316,14 +332,14 @@ def _continuation_machine(static, parameter, settings, tol, stop_on_instability)
             sc = parameter.set(scene, lam)
             return positions(t, m, sc, disc(sc))[N // 2, 1]
 
-        return scene, F, F_lam, Kf, w, fh, lo, hi
+        return scene, parameter, F, F_lam, Kf, w, fh, lo, hi
 
     def predicted(t, m, lam, tau, ds):
         return t + ds * tau[0], m + ds * tau[1], lam + ds * tau[2]
 
     def init(x):
         _, t0, m0, _, _, direction = x
-        scene, F, F_lam, Kf, w, fh, lo, hi = unpack(x)
+        scene, parameter, F, F_lam, Kf, w, fh, lo, hi = unpack(x)
         dtype, N = t0.dtype, t0.shape[0]
         lam0 = jnp.asarray(parameter.get(scene), dtype)
         K0 = Kf(t0, m0, lam0)
@@ -347,7 +363,7 @@ def _continuation_machine(static, parameter, settings, tol, stop_on_instability)
                     k=jnp.zeros((), jnp.int32), nu0=nu0)
 
     def step(x, c):
-        scene, F, F_lam, Kf, w, fh, lo, hi = unpack(x)
+        scene, parameter, F, F_lam, Kf, w, fh, lo, hi = unpack(x)
         steps = settings.steps_for(scene)
         nu0 = c["nu0"]
         t, m, lam, tau, ds = c["t"], c["m"], c["lam"], c["tau"], c["ds"]
@@ -445,9 +461,12 @@ def continue_branch(scene, eq, parameter: AbstractParameter = SymmetricAlpha(), 
     tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)
     lo, hi = bounds
     arrays, static = eqx.partition(scene, eqx.is_array)
-    x = (arrays, lax.stop_gradient(eq.theta), lax.stop_gradient(eq.force), jnp.asarray(lo, dtype), jnp.asarray(hi, dtype),
-         jnp.asarray(direction, dtype))
-    b, count, stop = _continuation_machine(static, parameter, settings, tol, stop_on_instability)(x)
+    # the parameter's arrays (a misalignment) travel with the scene's as data, not as a closure
+    p_arrays, p_static = eqx.partition(parameter, eqx.is_array)
+    p_arrays = lax.stop_gradient(p_arrays)
+    x = ((arrays, p_arrays), lax.stop_gradient(eq.theta), lax.stop_gradient(eq.force), jnp.asarray(lo, dtype),
+         jnp.asarray(hi, dtype), jnp.asarray(direction, dtype))
+    b, count, stop = _continuation_machine((static, p_static), settings, tol, stop_on_instability)(x)
     out = dict(buf=b, i=count, stop=stop)
     M = settings.max_points
     crossing = None

@@ -1,6 +1,6 @@
 r"""The quasi-static hysteresis loop of a symmetrically actuated strip (paper Fig. 2a-b, 3c).
 
-Protocol (MODEL.md): start in the down state at $\alpha=0$, raise $\alpha$ until it loses
+Protocol (docs/model.md): start in the down state at $\alpha=0$, raise $\alpha$ until it loses
 stability at $\alpha_{c,\rm up}$ and jumps to the up state; from the up state lower
 $\alpha$ until $\alpha_{c,\rm down}$ and the jump back down. [`jaxrod.snap_angles`][]
 gives the critical angles, their kinds and the states before and after each jump.
@@ -82,14 +82,15 @@ class Hysteresis(eqx.Module):
 
 
 def _energy_at(scene, theta, force, alpha):
-    sc = SymmetricAlpha().set(scene, alpha)
+    sc = SymmetricAlpha.for_scene(scene).set(scene, alpha)
     return _energies(theta, force, sc)["bending"]
 
 
 def hysteresis(scene, *, bound: float = jnp.pi, max_unstable: int = 1,
                settings: Continuation = Continuation(max_points=300)) -> Hysteresis:
     r"""The quasi-static hysteresis loop of `scene` under symmetric clamp rotation
-    $\alpha_L=\alpha_R=\alpha$ (the clamp angles of `scene` are ignored).
+    $\alpha_L=\alpha_R=\alpha$ (about the scene's clamp misalignment $\alpha_L-\alpha_R$, if any:
+    see [`jaxrod.SymmetricAlpha`][]; $\alpha$ is the mean clamp angle).
 
     Returns a [`jaxrod.Hysteresis`][]: fold height and bending energy along the four
     half-branches through the down and up start states (stable and unstable points
@@ -102,8 +103,8 @@ def hysteresis(scene, *, bound: float = jnp.pi, max_unstable: int = 1,
     check_int("max_unstable", max_unstable, lo=0)
     if not isinstance(settings, Continuation):
         raise ValueError(f"settings must be a jaxrod.Continuation, got {settings!r}")
-    parameter = SymmetricAlpha()
-    scene = jax.lax.stop_gradient(parameter.set(float_scene(scene), 0.0))
+    scene = float_scene(scene)
+    scene = jax.lax.stop_gradient(SymmetricAlpha.for_scene(scene).set(scene, 0.0))
     dtype = jnp.result_type(scene.strip.psi0)
     require_float64(dtype, "hysteresis")
     snap = snap_angles(scene, bound=bound)
@@ -112,7 +113,7 @@ def hysteresis(scene, *, bound: float = jnp.pi, max_unstable: int = 1,
 
 @jit
 def _branches(scene, snap, bound, max_unstable, settings):
-    parameter = SymmetricAlpha()
+    parameter = SymmetricAlpha.for_scene(scene)
     dtype = jnp.result_type(scene.strip.psi0)
     # start states: first point of the first stage of each path
     starts_t = jnp.stack([snap.up.branch.theta[0, 0], snap.down.branch.theta[0, 0]])
@@ -152,6 +153,7 @@ def _branches(scene, snap, bound, max_unstable, settings):
 
 
 def fold_height_of(theta, force, scene, alpha):
-    """Fold height of angles `theta` at symmetric clamp angle `alpha`."""
-    sc = SymmetricAlpha().set(scene, alpha)
+    """Fold height of angles `theta` at (mean) clamp angle `alpha`, about `scene`'s clamp
+    misalignment."""
+    sc = SymmetricAlpha.for_scene(scene).set(scene, alpha)
     return positions(theta, force, sc)[sc.mesh.n // 2, 1]

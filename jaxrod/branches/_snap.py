@@ -346,7 +346,7 @@ def follow_path(scene, start_eq, direction, parameter, settings, bound, bisectio
     (_, _, _, _, done, clicks, out), branches = lax.scan(body, init, jnp.arange(stages, dtype=jnp.int32))
     snaps, kind, t, m, lam, fb, ta, ma, fa, stop, landed, dist, last_stage, mode, warm = out
     snaps = snaps & done
-    # decided without a snap, but not at the parameter bound (stop 1): the continuation
+    # decided without a snap, but not at the parameter bound (`STOP_BOUND`): the continuation
     # gave up (buffer full, step too small); or never decided (every stage supercritical)
     incomplete = ~done | (~snaps & (stop != STOP_BOUND))
     # a path that reached the bound without losing stability but whose tangent all but turned
@@ -416,7 +416,10 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     r"""Critical clamp angles $\alpha_{c,\rm up}>0$ and $\alpha_{c,\rm down}<0$ of a scene
     under symmetric clamp rotation, their kinds, the states just before and after.
 
-    The clamp angles of `scene` are ignored (the loop starts at $\alpha=0$). A path that
+    Both clamps turn together, $\alpha_L=\alpha+\delta/2$, $\alpha_R=\alpha-\delta/2$, from the
+    loop's start at $\alpha=0$; $\delta=\alpha_L-\alpha_R$ is the clamp misalignment of `scene`
+    (0 for the paper's symmetric clamps, see [`jaxrod.SymmetricAlpha`][]), and $\alpha$ is the
+    mean clamp angle. Only the difference of the scene's clamp angles matters. A path that
     reaches $|\alpha|=$`bound` without losing stability does not snap (`snaps=False`,
     `alpha_c=NaN`, kind "none").
 
@@ -454,8 +457,9 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
     check_int("bisections", bisections, lo=1)
     check_bool("polish", polish)
     check_bool("continue_after_snap", continue_after_snap)
-    parameter = SymmetricAlpha()
-    scene_d = parameter.set(float_scene(scene), 0.0)  # carries gradients to the refinement
+    scene_d = float_scene(scene)
+    parameter = SymmetricAlpha.for_scene(scene_d)  # keeps the clamps' misalignment, if any
+    scene_d = parameter.set(scene_d, 0.0)  # carries gradients to the refinement
     scene = lax.stop_gradient(scene_d)
     require_float64(jnp.result_type(scene.strip.psi0), "snap_angles")
     near_paths = None
@@ -495,7 +499,7 @@ def snap_angles(scene, *, settings: Continuation = Continuation(), bound: float 
 
 def _polish_both(scene_d, r):
     """[`_polish`][] of both paths of `r` (through one traced body, `lax.map` over the paths)."""
-    parameter = SymmetricAlpha()
+    parameter = SymmetricAlpha.for_scene(scene_d)
     paths = jax.tree.map(lambda a, b: jnp.stack([a, b]), r.down, r.up)
     out = lax.map(lambda p: _polish(scene_d, p, parameter), paths)
     return SnapAngles(up=jax.tree.map(lambda x: x[1], out), down=jax.tree.map(lambda x: x[0], out))
@@ -507,7 +511,7 @@ def _snap_angles_from(scene, starts, settings, bound, bisections, continue_after
     them; a member whose `result` is not successful does not exist). `near_paths`: a
     `jaxrod.branches._warm.Near` stacked (down, up) to start each path from, or None. The
     paths are not polished (`_polish_both`) and carry no derivative."""
-    parameter = SymmetricAlpha()
+    parameter = SymmetricAlpha.for_scene(scene)
     scene = lax.stop_gradient(scene)
     dtype = jnp.result_type(scene.strip.psi0)
     tol = settings.tol if settings.tol is not None else (1e-9 if dtype == jnp.float64 else 1e-3)

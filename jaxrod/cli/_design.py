@@ -263,7 +263,7 @@ def _cmd_design_creases(args):
 
 
 def _scatter(text):
-    """`--scatter psi0=DEG[,gap=G][,s0=S][,uniform]` as a `jaxrod.design.Scatter` (InputError
+    """`--scatter psi0=DEG[,gap=G][,s0=S][,misalignment=DEG][,uniform]` as a `jaxrod.design.Scatter` (InputError
     naming the option on a bad spec)."""
     import jaxrod.design as ds
 
@@ -273,14 +273,15 @@ def _scatter(text):
             distribution = part
             continue
         name, _, value = part.partition("=")
-        if name not in ("psi0", "gap", "s0") or not value:
-            raise InputError(f"scatter: expected psi0=DEG,gap=G,s0=S[,uniform], got {text!r}")
+        if name not in ("psi0", "gap", "s0", "misalignment") or not value:
+            raise InputError(f"scatter: expected psi0=DEG,gap=G,s0=S,misalignment=DEG[,uniform], got {text!r}")
         try:
-            widths[{"psi0": "psi0_deg"}.get(name, name)] = float(value)
+            widths[{"psi0": "psi0_deg", "misalignment": "misalignment_deg"}.get(name, name)] = float(value)
         except ValueError:
             raise InputError(f"scatter: {name} must be a number, got {value!r}") from None
     if not widths:
-        raise InputError(f"scatter: give at least one width (psi0=DEG, gap=G or s0=S), got {text!r}")
+        raise InputError(f"scatter: give at least one width (psi0=DEG, gap=G, s0=S or misalignment=DEG), "
+                         f"got {text!r}")
     try:
         return ds.Scatter(**widths, distribution=distribution)
     except ValueError as e:
@@ -486,7 +487,7 @@ def register(sub):
                    help="robust design: both snap angles at this quantile of --scatter (needs both angle targets; "
                         "--psi0/--gap give the start, default 90 deg, 0.5)")
     p.add_argument("--scatter", default=None, metavar="SPEC",
-                   help="the scatter of a robust design: psi0=DEG[,gap=G][,s0=S][,uniform] (standard deviations, or "
+                   help="the scatter of a robust design: psi0=DEG[,gap=G][,s0=S][,misalignment=DEG][,uniform] (standard deviations, or "
                         "half-widths with uniform)")
     p.add_argument("--samples", type=int, default=64, metavar="M",
                    help="members of the scatter in a robust design (default %(default)d)")

@@ -149,17 +149,22 @@ def _brink_start(scene, alpha_c, theta_c, force_c, mode, exists, sgn, past, nudg
     critical point's own derivative (its extended system's, `jaxrod.critical_point`) is
     the right one."""
     a = alpha_c + sgn * past
-    sc_c = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (alpha_c, alpha_c))
-    sc_run = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (a, a))
+    # both clamps at the (mean) angle, about the scene's misalignment (`jaxrod.SymmetricAlpha`)
+    half = 0.5 * (scene.clamps.alpha_left - scene.clamps.alpha_right)
+    sc_c = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene,
+                       (alpha_c + half, alpha_c - half))
+    sc_run = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene, (a + half, a - half))
     theta0 = nudge_start(theta_c, mode, sc_run, sgn, nudge)
     ok = exists & jnp.all(jnp.isfinite(theta_c)) & jnp.all(jnp.isfinite(mode))
-    return Start(sc_run, theta0, Protocol(a, a), sgn, alpha_c, _bending(theta_c, sc_c, discretize(sc_c)), ok)
+    return Start(sc_run, theta0, Protocol(a + half, a - half), sgn, alpha_c,
+                 _bending(theta_c, sc_c, discretize(sc_c)), ok)
 
 
 def ramp(scene, direction="up", *, rate=0.5, alpha_start=None, right_only=False, snap=None,
          seed=0.0) -> Start:
     r"""The ramp scene: start at rest in the stable state opposite to `direction` with the
-    clamps at `alpha_start` (rad; default $\alpha_c-2^\circ$ in the snapping direction, from
+    clamps at `alpha_start` (rad, the mean clamp angle about the scene's misalignment as in
+    [`jaxrod.SymmetricAlpha`][]; default $\alpha_c-2^\circ$ in the snapping direction, from
     `jr.snap_angles`), then rotate at `rate` (rad/T, > 0; sign from `direction`). With
     `right_only=True` only the right clamp turns (the left stays at its angle in `scene`
     when `alpha_start` is given, else at 0). `seed` (rad, >= 0): the mirror-breaking
@@ -177,15 +182,20 @@ def ramp(scene, direction="up", *, rate=0.5, alpha_start=None, right_only=False,
         path = snap.up if sgn > 0 else snap.down
         alpha_c = path.alpha_c
         alpha_start = alpha_c - sgn * 2.0 * math.pi / 180.0
-    aL = scene.clamps.alpha_left if right_only else alpha_start
+    aR = alpha_start
+    if right_only:
+        aL = scene.clamps.alpha_left
+    else:  # both clamps at the (mean) angle, about the scene's misalignment (`jaxrod.SymmetricAlpha`)
+        half = 0.5 * (jnp.asarray(scene.clamps.alpha_left, float) - jnp.asarray(scene.clamps.alpha_right, float))
+        aL, aR = alpha_start + half, alpha_start - half
     sc = eqx.tree_at(lambda s: (s.clamps.alpha_left, s.clamps.alpha_right), scene,
-                     (jnp.asarray(aL, float), jnp.asarray(alpha_start, float)))
+                     (jnp.asarray(aL, float), jnp.asarray(aR, float)))
     eq = initial_state(sc, "down" if sgn > 0 else "up")
     from ..statics import bending_energy
 
     rl = 0.0 if right_only else sgn * rate
     theta0 = eq.theta if (isinstance(seed, (int, float)) and seed == 0) else mirror_seed(eq.theta, sc, seed)
-    return Start(sc, theta0, Protocol(aL, alpha_start, rl, sgn * rate), sgn, alpha_c,
+    return Start(sc, theta0, Protocol(aL, aR, rl, sgn * rate), sgn, alpha_c,
                  bending_energy(eq), eq.result == RESULTS.successful)
 
 
