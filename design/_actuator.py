@@ -2,7 +2,7 @@ r"""Study (d): a programmable actuator (the paper's Fig. 4), quasi-static and dy
 
 **Per-half observable.** For a strip with one central crease the *state of a half* is the
 sign of its quarter-point height: $h_L=y(L/4)$ (left half, node $N/4$) and $h_R=y(3L/4)$
-(right half, node $3N/4$), heights above the line through the clamps (MODEL.md: $y>0$ up).
+(right half, node $3N/4$), heights above the line through the clamps (docs/model.md: $y>0$ up).
 A state is labelled by two letters, left half first: ``"DD"`` (the down state, both halves
 below), ``"UU"`` (the up state), ``"UD"`` (left half up, right half down), ``"DU"``.
 A half *snaps* in a move when its letter changes across a loss of stability (a jump of the

@@ -8,7 +8,7 @@ weights $w$). A design *reaches* its targets when $|v - v^\*| \le \mathrm{tol}$ 
 Values (angles in degrees, lengths in $L$, energies in $B/L$):
 
 * `AlphaUp`, `AlphaDown`: the critical clamp angles $\alpha_{c,\rm up}$, $\alpha_{c,\rm down}$ of
-  symmetric actuation (MODEL.md; [`design.critical_angles`][] gives their implicit derivatives).
+  symmetric actuation (docs/model.md; [`design.critical_angles`][] gives their implicit derivatives).
 * `Hysteresis`: the width $\alpha_{c,\rm up} - \alpha_{c,\rm down}$ of the loop.
 * `FoldHeight(state, alpha_deg)`, `BendingEnergy(state, alpha_deg)`: $y(L/2)$ and $E_b$ of the
   stable up/down equilibrium at clamp angle $\alpha$ (implicit derivatives of

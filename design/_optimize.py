@@ -390,12 +390,11 @@ def optimize(terms, param: Parametrization | None = None, z0=None, *, n: int = 4
     chunk `vmap`-ed (k = 1: one start after the other); "devices": the starts split across
     every device JAX sees and every process (`jaxrod.ShardedMap`), ceil(B / devices) on each;
     "auto" (default): "devices" where JAX sees more than one device, else 1 on the CPU
-    backend and None elsewhere. Measured on 2 CPU cores at n = 100 (fold-height residual +
-    Jacobian, `benchmarks/results/design.md`): 64 starts took 5.61 s as one `vmap` (11.4
-    designs/s), 2.58 s in chunks of 8 and 1.83 s one by one (35.0 designs/s); 1024 starts
-    one by one 26.0 s (39.3 designs/s). Batched, every loop runs as long as its slowest
-    member and XLA:CPU gains nothing from the batch; a 4-start `vmap` of study (a) also hit
-    the XLA:CPU deadlock of docs/limitations.md once.
+    backend and None elsewhere. On a CPU one start after the other is the fastest and one
+    `vmap` the slowest (`benchmarks/results/design.md` has the multi-start throughput):
+    batched, every loop runs as long as its slowest member and XLA:CPU gains nothing from
+    the batch, and a `vmap` of starts can run into the XLA:CPU deadlock of
+    docs/limitations.md.
     """
     terms = tuple(terms)
     if not terms:

@@ -357,11 +357,11 @@ def fastest_snap_study(min_gap=0.3, *, s0=0.02, psi0_bounds=(10.0, 180.0), max_g
     records both). The best design is re-checked on `n_check` segments. `optimizer`: "lm"
     or an optax transformation (gradient ascent on v_s then, by its own steps).
 
-    Measured (N = 48, check N = 96, from Psi0 = 90 deg, G/L = 0.5; `jaxrod.snap_speed` with
-    RATTLE, benchmarks/results/design.md, 2026-12-02): 20 LM iterations end at G/L = 0.3
-    (the bound), Psi0 = 23.559 deg, v_s = 37.7251 v*; the polish (16 evaluations) moves Psi0
-    to 26.135 deg, v_s = 37.7720 v* (check 37.7290, 0.11 %); 93.1 s in all, compilation
-    included. A snap_speed grid on the same mesh (benchmarks/certify_study_b.py,
+    Result (N = 48, check N = 96, from Psi0 = 90 deg, G/L = 0.5; `jaxrod.snap_speed` with
+    RATTLE, benchmarks/results/design.md, which also times the study): 20 LM iterations end
+    at G/L = 0.3 (the bound), Psi0 = 23.559 deg, v_s = 37.7251 v*; the polish (16
+    evaluations) moves Psi0 to 26.135 deg, v_s = 37.7720 v* (check 37.7290, 0.11 %). A
+    snap_speed grid on the same mesh (benchmarks/certify_study_b.py,
     results/study_b_grid.md) has its maximum at Psi0 = 26.5 deg (0.25-deg grid), G/L = 0.3:
     37.7712 v*, so the design is at or above it (to the map's wiggle: second differences of
     the 0.25-deg grid reach 8e-3 v*, 2e-4 relative); v_s falls with G/L (grid maxima 37.02,

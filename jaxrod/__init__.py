@@ -7,15 +7,15 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING
 
 
 # jaxlib's CPU LAPACK kernels (the dense solves of the critical-point refinement, eigvalsh)
-# come from scipy's OpenBLAS, whose threads fight XLA's own: on a 2-core machine a 205 x 205
-# solve took 30x longer with the default thread count. One thread unless the user chose
-# (this has an effect only if scipy's OpenBLAS is not loaded yet).
+# come from scipy's OpenBLAS, whose threads fight XLA's own: on a machine with few cores the
+# default thread count makes a dense solve many times slower (docs/limitations.md). One thread
+# unless the user chose (this has an effect only if scipy's OpenBLAS is not loaded yet).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 # XLA:CPU can deadlock when a batched LAPACK kernel (a vmapped dense solve: jaxlib's
 # ParallelBatchMap on the intra-op Eigen pool) runs inside a while loop that itself runs on
-# that pool: with 2 cores the phase diagram (vmapped snap_angles) hung forever, every
-# thread waiting (cf. PyAutoFit issues 1528/1530). A single-threaded Eigen pool avoids it
-# and costs nothing measurable here (snap_angles at N = 100: 72 ms with, 76 ms without).
+# that pool: on a machine with few cores the phase diagram (vmapped snap_angles) can hang,
+# every thread waiting (cf. PyAutoFit issues 1528/1530). A single-threaded Eigen pool avoids
+# it and costs no measurable run time (docs/limitations.md).
 # XLA_FLAGS is read when the CPU backend starts, i.e. at the first computation.
 if "xla_cpu_multi_thread_eigen" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false").strip()
@@ -101,9 +101,8 @@ from .branches import termination_gap as termination_gap
 from .branches import TerminationGap as TerminationGap
 
 # dynamics: equations of motion, integrators, scenes, snap speed. Imported on first use
-# (`__getattr__` below): diffrax, which only the dynamics need, takes a quarter of a second
-# to import, and the statics, branches and CLI queries such as `jaxrod snap-angles` do
-# without it.
+# (`__getattr__` below): diffrax, which only the dynamics need, is slow to import, and the
+# statics, branches and CLI queries such as `jaxrod snap-angles` do without it.
 _DYNAMICS = (
     "ACTUATOR_DAMPING",
     "ACTUATOR_VISCOSITY",

@@ -59,9 +59,11 @@ COMPILE_MODES = ("auto", "fast", "optimized")
 
 TIER_UP_FACTOR = 5.0
 """In the "auto" compile mode, the calls of one argument signature switch from the fast to
-the optimized variant once they have run for `TIER_UP_FACTOR` times their first call. At
-N = 100 on 2 cores the optimized compile costs 2.5-3.3x the fast one and saves about half of
-each run, so it pays for itself after about five compiles' worth of fast runs."""
+the optimized variant once they have run for `TIER_UP_FACTOR` times their first call. The
+optimized compile costs a few times the fast one and saves about half of each run, so it
+pays for itself after about five compiles' worth of fast runs
+(`benchmarks/results/compile_fast.md` and `compile_optimized.md` have both code
+generations' times)."""
 
 MAX_SIGNATURES = 256
 """Argument signatures whose run time an entry point keeps account of in the "auto" mode (the

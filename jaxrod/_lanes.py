@@ -32,7 +32,8 @@ a lane of its own.
 
 A whole search made of such machines (`jaxrod.snap_angles`: start states, continuation,
 bisection, landing) is wrapped by [`in_turn`][]: on a CPU its batch runs the members one after
-another through the single program, which measured faster than any vectorized form there;
+another through the single program, which runs faster than any vectorized form there
+(benchmarks/results/batch_cpu.md);
 elsewhere it is one vectorized program whose machines run on lanes.
 """
 
@@ -51,8 +52,8 @@ MIN_QUEUE = {"cpu": 32}
 r"""Smallest batch that runs on `LANES` lanes per platform; a smaller one gives every member a
 lane of its own (one vectorized loop to its slowest member). With $L$ lanes a batch costs
 about $\sum_b n_b + L\max_b n_b$ member-passes, in one loop $B\max_b n_b$: lanes pay once
-$B$ is a few times $L$ (on 2 CPU cores a batch of 16 and the 5 rows of a phase diagram ran
-faster as one loop, the 128-scene grid of benchmarks/bench_batch.py 1.7x faster on lanes)."""
+$B$ is a few times $L$ (on a CPU a batch of 16 and the 5 rows of a phase diagram run faster
+as one loop, the 128-scene grid of benchmarks/bench_batch.py faster on lanes)."""
 
 
 def lanes_for(batch: int) -> int:
@@ -168,12 +169,13 @@ def in_turn(fn):
     vectorized program elsewhere.
 
     For a search made of nested solver loops (a snap path: start states, continuation,
-    bisection, landing) a vectorized batch on a CPU buys little per member (a corrector pass at
-    N = 100 costs about 45 us alone and 31 us per member in a batch of 128: the CPU runs the
-    batched arithmetic at about the same rate) and pays for every masked-out iteration, every
-    `cond` whose branches both run and every loop that runs to its slowest member; a loop of
-    the single program pays for none of them, needs one member's memory and compiles the single
-    program. Every member is then its single call exactly. Nested `vmap`s loop over every axis.
+    bisection, landing) a vectorized batch on a CPU buys little per member (a corrector pass
+    costs each member of a large batch nearly what it costs alone: the CPU runs the batched
+    arithmetic at about the same rate; docs/limitations.md) and pays for every masked-out
+    iteration, every `cond` whose branches both run and every loop that runs to its slowest
+    member; a loop of the single program pays for none of them, needs one member's memory and
+    compiles the single program. Every member is then its single call exactly. Nested `vmap`s
+    loop over every axis.
     Differentiable where `fn`'s result does not depend on its input through the loop (as
     [`machine_vmap`][])."""
 

@@ -103,9 +103,9 @@ def run_if(pred, fn, default, operands=()):
     leaves are passed through as they are), not only by closure: inside the loop they pass
     an `optimization_barrier` together with the loop's flag, so XLA cannot see them as
     loop-invariant. Otherwise its while-loop-invariant code motion hoists the whole of `fn`
-    (which reads nothing from the loop carry) out of the loop and runs it every time: that
-    made the vmapped phase diagram run the homotopy at every gap (measured 0.2 s per gap at
-    5 Psi0, N = 100, instead of 3 ms)."""
+    (which reads nothing from the loop carry) out of the loop and runs it every time: the
+    vmapped phase diagram would then run the homotopy at every gap, not only where a warm
+    start fails (`tests/test_run_if.py`)."""
     arrays, static = eqx.partition(operands, eqx.is_array)
 
     def body(c):

@@ -4,14 +4,14 @@ and a physical strip (`jr.Strip.from_physical`) fed into `jr.simulate`.
 
 Every check compares with something computed here, independently of the integrator:
 - dissipation: the energy lost over a window equals the work of the dissipative forces,
-  integrated from the trajectory's own frames with the formulas of MODEL.md /
+  integrated from the trajectory's own frames with the formulas of docs/model.md /
   `jaxrod.dynamics._equations` (drag power -c_d sum_k (m_k / lambda) |v_k|^3, viscous power
   -eta sum_k phidot_k^2 / ell_k, damping power -gamma sum_k m_k |v_k|^2);
 - gravity: the initial acceleration of a strip released from rest is the mass-weighted
   projection of uniform gravity onto the motions the links allow (Gauss's principle of least
   constraint, solved here as a dense KKT system with NumPy);
 - physical units: B = E t^3 w / 12, lambda = rho t w, v* = sqrt(B / (lambda L^2)), T = L / v*
-  computed by hand (MODEL.md), speeds scale by v*, times by T, energies by B / L.
+  computed by hand (docs/model.md), speeds scale by v*, times by T, energies by B / L.
 
 Small meshes (N = 24) and short horizons (t1 <= 0.8 T); clamps held fixed from a stable
 equilibrium plus a perturbation (no snap), or a snap stopped at its first overshoot (RATTLE,
@@ -251,14 +251,14 @@ def test_released_strip_falls_at_the_constrained_rate(gravity_runs):
 
 # --- a physical strip --------------------------------------------------------------------------
 
-PET = dict(youngs_modulus=4.5e9, density=1380.0, thickness=250e-6, width=0.02, length=0.2)  # MODEL.md's PET
+PET = dict(youngs_modulus=4.5e9, density=1380.0, thickness=250e-6, width=0.02, length=0.2)  # docs/model.md's PET
 RATE = 3.0  # rad/T: a fast symmetric ramp from the down state at alpha = 0, snaps up at ~0.58 T
 
 
 @pytest.fixture(scope="module")
 def pet_runs():
     E, rho, t, w, L = (PET[k] for k in ("youngs_modulus", "density", "thickness", "width", "length"))
-    B, lam = E * t**3 * w / 12.0, rho * t * w  # by hand (MODEL.md)
+    B, lam = E * t**3 * w / 12.0, rho * t * w  # by hand (docs/model.md)
     vstar = math.sqrt(B / (lam * L**2))
     T = L / vstar
     psi0 = math.radians(30.0)
@@ -280,7 +280,7 @@ def test_from_physical_strip_fields(pet_runs):
     assert float(st.line_density) == pytest.approx(r["lam"], rel=1e-14)
     assert float(st.length) == r["L"] and float(st.s0) == pytest.approx(0.02 * r["L"], rel=1e-14)
     assert float(st.speed_gauge) == pytest.approx(r["vstar"], rel=1e-14)
-    # MODEL.md's closed form, independent of the width: v* = (t / L) sqrt(E / (12 rho))
+    # docs/model.md's closed form, independent of the width: v* = (t / L) sqrt(E / (12 rho))
     closed = PET["thickness"] / r["L"] * math.sqrt(PET["youngs_modulus"] / (12 * PET["density"]))
     assert r["vstar"] == pytest.approx(closed, rel=1e-14)
     assert float(st.time_unit) == pytest.approx(r["T"], rel=1e-14)

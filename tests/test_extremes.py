@@ -100,7 +100,7 @@ def test_direct_newton_from_flat_guess(psi0, gap, alpha):
 
 
 def test_down_state_missing_for_tight_fold_at_large_gap():
-    """MODEL.md: for tight folds at large gaps the down state does not exist at alpha = 0.
+    """docs/model.md: for tight folds at large gaps the down state does not exist at alpha = 0.
 
     Psi0 = 30 deg (s0 = 0.02 L, N = 100): the down branch ends at a fold (limit point) in the
     gap at G*/L ~ 0.645, where its lowest eigenvalue vanishes like sqrt(G* - G) (measured
@@ -125,7 +125,7 @@ def test_down_state_missing_for_tight_fold_at_large_gap():
         assert eq.result == jr.RESULTS.state_not_found, (g, jr.RESULTS[eq.result])
         # while the up state exists there
         check_state(state(30.0, g, "up"), "up")
-    # a wider fold keeps its down state longer (MODEL.md: the branches end at a gap that grows
+    # a wider fold keeps its down state longer (docs/model.md: the branches end at a gap that grows
     # with Psi0)
     check_state(state(60.0, 0.7, "down"), "down")
 

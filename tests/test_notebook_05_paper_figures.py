@@ -81,7 +81,7 @@ def check(nb):
 
     # --- master curves: where the convergence study has the point, the N = 40 angles; where a
     # path snaps, against the termination gaps G*(Psi0) (n = 100; points within 0.02 of G* are
-    # not judged); the flat strip symmetric and snapping at every gap (MODEL.md)
+    # not judged); the flat strip symmetric and snapping at every gap (docs/model.md)
     term = json.loads((RESULTS / "termination.json").read_text())["rows"]
     conv = json.loads((RESULTS / "convergence_alpha_c.json").read_text())["data"]["uniform"]["50"]
     judged = 0

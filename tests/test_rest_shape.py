@@ -57,7 +57,7 @@ def test_rest_shape_is_recovered(psi0_deg):
     assert np.max(np.abs(r[-1] - [float(scene.clamps.gap), 0.0])) < 1e-14
     rt, rm = residual(eq)
     assert rt < 1e-12 and rm < 1e-12
-    # the crease points up in the rest shape (MODEL.md)
+    # the crease points up in the rest shape (docs/model.md)
     assert float(jr.fold_height(eq)) > 0
     # curvature equals the natural one: phi_k / ell_k = (theta0(m_k+1) - theta0(m_k)) / ell_k
     d = jr.discretize(scene)
@@ -66,7 +66,7 @@ def test_rest_shape_is_recovered(psi0_deg):
 
 @pytest.mark.parametrize("s0", [0.02, 0.002])
 def test_total_crease_turning_is_exact(s0):
-    """MODEL.md: the discrete natural turning angles add up to theta0(L) - theta0(0) at any
+    """docs/model.md: the discrete natural turning angles add up to theta0(L) - theta0(0) at any
     resolution, also when the crease is narrower than a segment (s0 = 0.002, h = 0.01)."""
     for n in (8, 100):
         scene = jr.Scene(jr.Strip(psi0=math.radians(30.0), s0=s0), jr.Clamps(0.5), jr.Mesh(n))

@@ -7,7 +7,7 @@ Write the deflection w(x), x in [0, L], end shortening delta = L - G. Linear sha
 theory: energy (B/2) int w''^2 with the inextensibility constraint
 (1/2) int w'^2 dx = delta, so B w'''' + P w'' = 0 with P = B tau^2 the compression
 (the Lagrange multiplier), w(0) = w(L) = 0 and, for the mirror-symmetric clamp
-rotation of MODEL.md, w'(0) = alpha, w'(L) = -alpha. Scale L = 1, w = sqrt(delta) W,
+rotation of docs/model.md, w'(0) = alpha, w'(L) = -alpha. Scale L = 1, w = sqrt(delta) W,
 alpha = sqrt(delta) A: then (1/2) int W'^2 = 1, W'(0) = A, W'(1) = -A, independent of
 delta. With xi = x - 1/2 the general solution is W = a + b xi + c cos(tau xi) + d sin(tau xi).
 * Symmetric part: W'(+-1/2) = -+A gives c = A / (tau sin(tau/2)), and W(+-1/2) = 0 gives

@@ -1,13 +1,13 @@
 !----------------------------------------------------------------------------------------
 ! AUTO-07p equation file: the CONTINUOUS creased strip, a two-point boundary-value problem
 ! solved by AUTO's own orthogonal collocation (IPS = 4). Planar inextensible Kirchhoff
-! elastica, B = L = 1, no gravity (MODEL.md):
+! elastica, B = L = 1, no gravity (docs/model.md):
 !
 !   x' = cos theta,   y' = sin theta,   theta' = k0(s) + m,   m' = mu_x sin theta - mu_y cos theta
 !
 ! over s in [0, 1] (m = theta' - theta0' is the bending moment / B), the Euler-Lagrange
 ! equations of  1/2 int (theta' - theta0')^2 ds - mu_x (int cos theta - G) - mu_y int sin theta,
-! i.e. jaxrod's Lagrangian in the limit N -> oo. Natural curvature of the crease (MODEL.md,
+! i.e. jaxrod's Lagrangian in the limit N -> oo. Natural curvature of the crease (docs/model.md,
 ! jaxrod Strip.natural_angle):
 !   theta0(s) = A tanh((s - 1/2)/s0),  A = (Psi0 - pi)/2,   k0 = theta0' = (A/s0) sech^2((s - 1/2)/s0).
 ! Clamps: x(0) = y(0) = 0, theta(0) = +alpha; x(1) = G, y(1) = 0, theta(1) = -alpha.

@@ -42,9 +42,9 @@ $F$ and $\mathsf Kv$, $\ell^\top v_\theta$) give every entry: 11 forward and 5 r
 probes for the fold system instead of $2N+5$ forward ones (9 and 3 for the branch-point
 system on its own, 12 and 6 for the cusp's). Each Newton step solves with it by block elimination
 ([`_block_solve`][]): two tridiagonal solves for the angle blocks and a Schur complement of
-the 5 (3, 6) remaining unknowns, $O(N)$ instead of a dense LU's $O(N^3)$ (N = 120: 66 us
-instead of 491 us per solve). With self-contact the angle blocks are dense: `jax.jacfwd`
-builds the Jacobian and one dense LU solves with it.
+the 5 (3, 6) remaining unknowns, $O(N)$ instead of a dense LU's $O(N^3)$. With
+self-contact the angle blocks are dense: `jax.jacfwd` builds the Jacobian and one dense LU
+solves with it.
 
 **Derivatives.** The Newton iterations run on `stop_gradient`-ed data; the root $z^\ast$
 then carries a custom derivative rule (`_implicit_step`), the implicit-function derivative

@@ -137,8 +137,8 @@ def snap_angles_extrapolated(scene: Scene, *, continue_after_snap: bool = False,
 
     `continue_after_snap` defaults to False here: the landed branch after each snap (the
     post-snap stage of the hysteresis figures) does not change the critical angles or the
-    landed states, and skipping it saves about a quarter of the run (N = 60 + 120: 116 ms ->
-    85 ms on 2 cores); pass True to keep it in `coarse` and `fine`."""
+    landed states, and skipping it saves about a quarter of the run; pass True to keep it
+    in `coarse` and `fine`."""
     fine_scene = refined_scene(scene)
     kwargs = dict(kwargs, continue_after_snap=continue_after_snap)
 
@@ -160,7 +160,7 @@ def _read(path):
 @eqx.filter_jit
 def _extrapolate_paths(coarse_up, coarse_down, fine_up, fine_down):
     """Both paths' [`extrapolate_path`][] (from the fields it reads) as one small compiled
-    program: called eagerly, its few dozen scalar operations cost about 1.3 ms of dispatch, a
-    tenth of the whole query at N = 30 + 60."""
+    program: called eagerly, its few dozen scalar operations would each pay their own
+    dispatch, a noticeable part of the whole query on small meshes."""
     ns = lambda d: SimpleNamespace(**d)  # noqa: E731
     return (extrapolate_path(ns(coarse_up), ns(fine_up)), extrapolate_path(ns(coarse_down), ns(fine_down)))

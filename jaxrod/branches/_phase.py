@@ -1,6 +1,6 @@
 r"""Phase diagram of the snap angles (paper Fig. 2c): $\alpha_{c,\rm up}$ and
 $\alpha_{c,\rm down}$ of [`jaxrod.snap_angles`][] over a grid of fold angles $\Psi_0$ and
-gaps $G/L$ (symmetric actuation, $\alpha_L=\alpha_R=\alpha$, conventions of MODEL.md), and
+gaps $G/L$ (symmetric actuation, $\alpha_L=\alpha_R=\alpha$, conventions of docs/model.md), and
 optionally over fold widths $s_0$.
 
 One chunk per $\Psi_0$: a single jitted call that runs through the gaps in order
@@ -14,9 +14,10 @@ without following the landed branch after a snap (`continue_after_snap=False`), 
 the same $\alpha_c$; each path starts from the previous gap's critical point
 (`snap_angles(..., near=)`, checked as `jaxrod.branches._warm` describes) and walks its
 whole branch only where that start fails its checks (the first gap, a change of kind, the
-end of snapping). `warm_paths` (0, 1 or 2) records how many paths were warm. Homotopy (51 ms of 93 ms per scene at N = 100) was most of the cost
-of single calls; `tests/test_phase_diagram.py` checks a small grid against single
-`snap_angles` calls (the same kinds, start codes and landing states).
+end of snapping). `warm_paths` (0, 1 or 2) records how many paths were warm. The homotopy
+is most of the cost of a single call, which the warm starts save;
+`tests/test_phase_diagram.py` checks a small grid against single `snap_angles` calls (the
+same kinds, start codes and landing states).
 $\Psi_0$ and the gaps are traced, so every chunk reuses one compilation (per mesh and grid
 length). Each gap keeps its own result code: a gap where a state does not exist gives
 NaN angles there and does not affect the others.
@@ -32,10 +33,10 @@ it XLA hoisted the work out of the loop and ran it every time). The warm start a
 homotopy that replaces it where it fails are one loop with one Newton solve
 (`initial_state_signed(..., warm=...)`): batched, a member whose warm start held waits
 while another member runs its homotopy. On XLA:CPU the batched linear algebra goes through
-`jaxrod.linalg.batched` (batched LAPACK calls inside the loops had deadlocked 2-core machines).
-Measured on 2 CPU cores (`benchmarks/bench_phase.py`, both side by side, 5 x 41 at
-N = 100): the vmapped call 3.98 s, the sequential chunks 2.70 s, so `batch="auto"` picks
-`"scan"` (one call per $\Psi_0$) on the CPU and `"vmap"` elsewhere.
+`jaxrod.linalg.batched` (batched LAPACK calls inside the loops can deadlock XLA:CPU,
+docs/limitations.md). On a CPU the sequential chunks run faster than the vmapped call
+(`benchmarks/bench_phase.py` times both side by side, `benchmarks/results/phase.md`), so
+`batch="auto"` picks `"scan"` (one call per $\Psi_0$) on the CPU and `"vmap"` elsewhere.
 
 **The fold width as an axis** (`s0` a list or array): a chunk is then one pair
 $(s_0, \Psi_0)$, and the pairs are the batch of the same machinery: one call per pair
@@ -130,7 +131,7 @@ def _chunk(psi0, gaps, s0, mesh, keep_branch=False, settings=Continuation(), con
         strip = layout_strip(psi0, s0, layout)
         scene = par.set(float_scene(Scene(strip, Clamps(g), mesh, contact=_contact(contact))), 0.0)
         # both start states through one traced body (`lax.map` over the side): one compiled
-        # copy of the warm Newton and of the homotopy instead of two (XLA compile at -O0 25 s -> 20 s)
+        # copy of the warm Newton and of the homotopy instead of two (a shorter XLA compile)
         is_sds = lambda x: isinstance(x, jax.ShapeDtypeStruct)  # noqa: E731
         static = eqx.filter(eqx.filter_eval_shape(initial_state_signed, scene, jnp.ones((), dtype)), is_sds, inverse=True)
 
@@ -281,7 +282,7 @@ def phase_diagram(psi0_deg, gaps, *, s0=0.02, n=100, refine=1.0, out=None, progr
     call), `"shard"` (the chunks still to compute split across `devices`, default every
     device of every process, `per_device` of them per device in each call, by
     [`jaxrod.sweeps.ShardedMap`][] with its `mode` = `split`) or `"auto"` (`"shard"` where JAX
-    sees more than one device, else `"scan"` on the CPU, where it measured faster, and
+    sees more than one device, else `"scan"` on the CPU, where it runs faster, and
     `"vmap"` elsewhere). A chunk is one $\Psi_0$ (one pair $(s_0, \Psi_0)$ with an `s0`
     axis) and all the gaps. All give the same numbers. With several processes
     (`jax.distributed.initialize()`), process 0 writes the files and every process reads

@@ -1,7 +1,7 @@
 r"""Termination gap $G^\ast(\Psi_0)$: the gap beyond which a snapping path no longer snaps.
 
-MODEL.md: beyond $G^\ast$ "the fold height varies continuously with alpha, with no loss of
-stability". Each path (snap up, snap down) is located in two stages:
+Beyond $G^\ast$ the fold height varies continuously with $\alpha$, with no loss of stability
+(docs/model.md). Each path (snap up, snap down) is located in two stages:
 
 1. the snap criterion of [`jaxrod.snap_angles`][] ("does it snap at this gap") on a grid
    of gaps $G/L\in(0,1)$ (default 0.05, 0.10, ..., 0.95, 0.99): the bracket is the largest
@@ -18,7 +18,7 @@ stability". Each path (snap up, snap down) is located in two stages:
    ("bisection").
 
 At a cusp the two nearly agree: `snap_angles` counts every loss of stability at a fold as
-a snap however small its jump (MODEL.md), so its criterion holds until the fold pair, and
+a snap however small its jump (docs/model.md), so its criterion holds until the fold pair, and
 with it every loss of stability on the path, ends at the cusp, except within 8e-5 to 7e-4
 in G/L of it, where the S the branch makes there is shorter than a continuation step at
 the default `Continuation()` (measured at n = 100, benchmarks/results/termination.md: at
@@ -37,7 +37,7 @@ What ends each path (`reason_*`):
   $\alpha=0$) stops existing at $G^\ast_+$;
 - `"no_termination"`: it still snaps at the largest grid gap ($G^\ast=1$ reported);
 - `"flat_strip_never_stops"`: $\Psi_0=180^\circ$ exactly: the flat strip snaps at every
-  gap (MODEL.md; the snap is a jump to the other state, whose size relative to the
+  gap (docs/model.md; the snap is a jump to the other state, whose size relative to the
   buckle amplitude does not shrink as $G\to L$), $G^\ast=1$. Not scanned: near $G=L$
   the absolute jump falls below `JUMP_DISTANCE` (at $G/L\approx0.979$ for n = 100) and
   `snap_angles` would stop resolving it;
@@ -219,11 +219,11 @@ def termination_gap(psi0_deg, *, s0=0.02, n=100, tol=1e-5, grid=DEFAULT_GRID,
     `jaxrod.phase_diagram(..., creases=...)`). `contact`: a `jaxrod.Contact` to model
     self-contact at every gap (the termination gaps lie where the strip stays clear of
     itself, so they do not change; the small gaps of the scan then snap as a real strip
-    does instead of being flagged `self_intersecting`; each evaluation costs about 100x
-    more). Needs float64.
+    does instead of being flagged `self_intersecting`; each evaluation costs much more, as
+    `benchmarks/results/contact.md` shows). Needs float64.
 
     Returns a [`jaxrod.TerminationGap`][]. One compilation per `(n, s0 dtype)`; each
-    evaluation is one `snap_angles` call (~0.3 s at n = 100)."""
+    evaluation is one `snap_angles` call."""
     from ._snap import KIND_NAMES
 
     check_param("psi0", psi0_deg, lo=0.0, hi=180.0, hi_open=False, unit=" deg")

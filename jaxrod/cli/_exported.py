@@ -1,8 +1,8 @@
 r"""Exported programs for the CLI's fixed queries: trace and lower once, reuse after.
 
 A CLI query such as `jaxrod snap-angles` runs one jitted function of the scene's array
-leaves. Tracing and lowering the library to StableHLO takes seconds on every run (about
-10 s for `snap_angles` on two meshes on a 2-core machine), and JAX's persistent
+leaves. Tracing and lowering the library to StableHLO takes seconds on every run
+(`benchmarks/results/compile.md` times it per entry point), and JAX's persistent
 compilation cache only saves the XLA compile that follows, because its key is the lowered
 module. So the first run of a query exports the function (`jax.export`: the lowered
 module with its input and output structure) to `<cache>/jaxrod/exported/<key>.jaxexport`;

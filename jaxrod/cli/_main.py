@@ -398,10 +398,10 @@ def _enable_x64():
 
 
 def _compilation_cache(jax):
-    """Reuse compiled code between CLI runs (a snap-angles run spends ~20 s compiling and
-    well under 1 s computing): JAX's persistent cache in JAX_COMPILATION_CACHE_DIR if set,
-    else ~/.cache/jaxrod/xla; JAXROD_NO_CACHE=1 turns it off. Best effort: an unwritable
-    directory only means no cache."""
+    """Reuse compiled code between CLI runs (a snap-angles run spends most of its time
+    compiling, `benchmarks/results/compile.md`): JAX's persistent cache in
+    JAX_COMPILATION_CACHE_DIR if set, else ~/.cache/jaxrod/xla; JAXROD_NO_CACHE=1 turns it
+    off. Best effort: an unwritable directory only means no cache."""
     if os.environ.get("JAXROD_NO_CACHE") or os.environ.get("JAX_COMPILATION_CACHE_DIR"):
         return
     path = os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "jaxrod", "xla")
@@ -531,8 +531,8 @@ def _snap_arrays(scene, continue_after_snap=False):
 def _extrapolated_arrays(coarse, fine, factor=2):
     """`jaxrod.snap_angles_extrapolated`'s values from the two meshes' `_snap_arrays`
     (`jaxrod.extrapolate_path`), the second critical points extrapolated where both meshes
-    find one of the same kind, the clearances of the fine mesh. One small jitted program
-    (0.1 s to compile) rather than a dozen eager operations each compiled on first use."""
+    find one of the same kind, the clearances of the fine mesh. One small jitted program,
+    quick to compile, rather than a dozen eager operations each compiled on first use."""
     import jax
     import numpy as np
 

@@ -5,7 +5,7 @@ point by point, so an interrupted run resumes), returns Markdown and table rows
 (quantity, paper, jaxrod, note), and may draw figures. Nothing is fitted to the paper.
 Dynamic snaps also keep their trajectories in `DIR/traj/*.npz` (for the figures).
 
-Defaults: the strip of MODEL.md ($L=B=\lambda=1$, $s_0=0.02$), symmetric actuation.
+Defaults: the strip of docs/model.md ($L=B=\lambda=1$, $s_0=0.02$), symmetric actuation.
 Statics mesh: $N=200$ ($N=60$ with `quick`); the critical angles converge as $N^{-2}$
 ($\approx 1000^\circ/N^2$). Dynamics (`dynamics_config`): brink snaps with `jr.snap_dynamics`,
 $N=100$, jaxrod's default integrator (RATTLE at its automatic step, v_s error 1.7e-5 at
@@ -265,7 +265,7 @@ def section_master_curves(cache, n, out, progress, quick=False):
 _PAPER_FIT = (42.59, 30.38, 5.00)  # v_s/v* = v_m - a G/L - b Psi0 (Psi0 in rad), the paper's Eq. 3
 _T1 = 4.0  # time limit in T; every brink snap here ends (first overshoot) before 1.6 T
 _N_FRAMES = 64
-# PET (MODEL.md): L = 20 cm, t = 80-250 um, E ~ 4-5 GPa, rho ~ 1380 kg/m^3. v* = (t/L) sqrt(E/(12 rho))
+# PET (docs/model.md): L = 20 cm, t = 80-250 um, E ~ 4-5 GPa, rho ~ 1380 kg/m^3. v* = (t/L) sqrt(E/(12 rho))
 # does not depend on the width.
 _PET = dict(youngs_modulus=4.5e9, density=1380.0, width=0.02, length=0.2)
 _PET_THICKNESS = (80e-6, 250e-6)
@@ -491,7 +491,7 @@ def section_speed_plane(cache, out, progress, cfg):
 
 
 def pet_speed_gauges():
-    """v* (m/s) of the paper's PET strips (MODEL.md) for the thinnest and thickest sheet,
+    """v* (m/s) of the paper's PET strips (docs/model.md) for the thinnest and thickest sheet,
     through `jr.Strip.from_physical`."""
     import jaxrod as jr
 

@@ -3,7 +3,7 @@ r"""Rigid bodies the strip can strike: balls, a table, a floor, and their contac
 **Balls.** Ball $m=1..M$ is a rigid disc in the strip's plane (or the section of a ball
 through it): centre $\mathbf c_m$, radius $R_m$, mass $M_m$, translating only (no spin:
 without friction between the strip and the ball a spin is never excited). Positions in the
-frame of MODEL.md (left clamp at the origin, right clamp at $(G,0)$), units of the scene
+frame of docs/model.md (left clamp at the origin, right clamp at $(G,0)$), units of the scene
 ($L$, and $\lambda L$ for masses; natural units by default).
 
 **Contact law.** Every contact is the penalty of self-contact (`jaxrod.energy.contact.penalty`)

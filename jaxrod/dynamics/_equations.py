@@ -55,7 +55,7 @@ class Protocol(eqx.Module):
     r"""Clamp angles as functions of time: linear ramps that stop at `t_stop`.
 
     $\alpha_L(t)=\alpha_{L,0}+\omega_L\,\min(\max(t,0),t_{stop})$, same for $\alpha_R$ (radians,
-    MODEL.md signs; rates in rad per time unit). `t_stop=inf` ramps for ever."""
+    the signs of docs/model.md; rates in rad per time unit). `t_stop=inf` ramps for ever."""
 
     alpha_left0: jax.Array
     alpha_right0: jax.Array

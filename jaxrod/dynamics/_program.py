@@ -1,7 +1,7 @@
 r"""Clamp programs: the clamp angles as piecewise-linear functions of time.
 
 A `Program` holds knots $t_0<t_1<\dots<t_{K-1}$ and the clamp angles there,
-$\alpha_{L,k}$, $\alpha_{R,k}$ (radians, MODEL.md signs: positive tilts an end upward). Between
+$\alpha_{L,k}$, $\alpha_{R,k}$ (radians, the signs of docs/model.md: positive tilts an end upward). Between
 knots each angle moves linearly; before $t_0$ and after $t_{K-1}$ it holds its end value.
 The rates are the slopes of the current piece (zero outside the knots). Any number of knots:
 a program can take the strip through several snaps in one run (`jaxrod.actuate`).

@@ -186,8 +186,8 @@ DT_CAP = 2e-4
 # (tests/test_long_horizon.py), at 9x the steps of the snap's own step.
 RING_COURANT = 0.05
 # `jaxrod.HHT`'s default number of fine-grid samples: its dense output is a cubic Hermite
-# interpolant, and 4096 samples on [0, 2 T] put ~30 on the brink snap's speed peak (16384 cost
-# 18 % more time at N = 100 for the same v_s to 1e-5).
+# interpolant, and 4096 samples on [0, 2 T] put ~30 on the brink snap's speed peak (more
+# samples cost more time for the same v_s to 1e-5).
 HHT_N_FINE = 4096
 # The longest fixed-step RATTLE run `simulate` starts (a larger t1 is refused, naming t1).
 MAX_FIXED_STEPS = 10**8
@@ -304,8 +304,8 @@ def simulate(scene, theta0, protocol: Protocol, *, omega0=None, t1=2.0, directio
     step, else 1, so that a given `dt` stays RATTLE's step unless `substeps` is given: then
     `dt` is the diffrax step of `substeps` RATTLE steps); the fine grid then samples every
     `substeps`-th step and diffrax's per-step work (event, saving) runs that much less often
-    (`benchmarks/results/pyelastica.md` measures the trade: 1.7x less time at N = 50, v_s
-    error 9.6e-5 instead of 3.5e-5). `max_steps`: default 200 000, or for `"rattle"` enough fixed
+    (`benchmarks/results/pyelastica.md` measures the trade: less time for a somewhat larger
+    $v_s$ error). `max_steps`: default 200 000, or for `"rattle"` enough fixed
     steps for $t_1$ when $L=B=\lambda=1$; a run that hits it ends with
     `result == RESULTS.steps_exhausted`.
 

@@ -4,7 +4,7 @@ r"""A differentiable snapping speed $v_s$ of a design: `snap_speed(scene, direct
 strip at its critical state, the clamps held just past the critical angle, released from
 rest), integrated with a **fixed step**, and its peak fold speed
 $v_s=\max_t|\dot{\mathbf x}(L/2,t)|$ in the units of the scene ($v^\ast$ for
-$L=B=\lambda=1$, MODEL.md):
+$L=B=\lambda=1$, docs/model.md):
 
 1. $\alpha_c$, the critical state $(\theta_c,\mu_c)$ and the unstable mode $v$ of the
    `direction` path from [`jaxrod.snap_angles`][] (continuation + bisection, then refined
@@ -25,10 +25,9 @@ $L=B=\lambda=1$, MODEL.md):
    waves, measured at $N=48$: Tsit5 stable at $dt=10^{-4}=0.23\,h^2$, unstable at
    $2\times10^{-4}$); up to the snap's first overshoot (the run's event) or `t1`; $v_s$ is
    the maximum of the sampled fold speed, refined by the 7-point polynomial of
-   `_refine_peak`. RATTLE is the default since it was measured here (table below): the same
-   $v_s$ to 5e-4, less forward time from N ~ 24 on (1.6x at N = 24: 0.056 s vs 0.089 s;
-   2.5x at 32; 5x at 48: 0.080 s vs 0.43 s; equal at N = 16) and a gradient 2.6x faster at
-   N = 48 (15 s vs 40 s with compilation).
+   `_refine_peak`. RATTLE is the default: the same $v_s$ as Tsit5 to 5e-4 (table below),
+   less forward time from N ~ 24 on, the gap widening with N, and a faster gradient
+   (`benchmarks/results/dynamics.md` times the integrators on the brink snap).
 
 **Why it is smooth.** Every step is a smooth map of the design $p=(\Psi_0,G,s_0,\dots)$:
 the implicit derivatives of the critical point, a fixed number of projection steps, and a
@@ -55,17 +54,16 @@ mirror image (both give the same $v_s$ by symmetry).
 **Accuracy** (measured; defaults `nudge` 0.03 RMS, `past` 1e-3). Psi0 = 90 deg, G/L = 0.46,
 s0 = 0.02 (the study (c) design; a branch point, alpha_c = 80.80 deg at N = 48). Reference:
 `jaxrod.snap_dynamics` (brink, nudge 1e-2 rad max-norm, adaptive Dopri8, rtol = atol =
-1e-9) at the same N. RATTLE (the default; forward time after compiling, 2026-12-02) and
-Tsit5 at 0.15 h^2 (2026-11):
+1e-9) at the same N. RATTLE (the default) and Tsit5 at 0.15 h^2:
 
-| N | RATTLE | steps | time (s) | Tsit5 | reference | RATTLE vs converged |
-|---|---|---|---|---|---|---|
-| 16 | 20.4116 | 3560 | 0.036 | 20.4123 | | +2.0 % |
-| 24 | 20.3323 | 3485 | 0.056 | 20.3323 | 20.3454 | +1.6 % |
-| 32 | 20.2064 | 3463 | 0.065 | 20.2056 | 20.2198 | +0.95 % |
-| 48 | 20.0929 | 3530 | 0.080 | 20.0922 | 20.1053 | +0.39 % |
-| 96 | 20.0389 | 14084 | 0.374 | 20.0307 | 20.0379 | +0.12 % |
-| 192 | 20.0283 | 56299 | 3.01 | 20.0190 | | +0.07 % |
+| N | RATTLE | steps | Tsit5 | reference | RATTLE vs converged |
+|---|---|---|---|---|---|
+| 16 | 20.4116 | 3560 | 20.4123 | | +2.0 % |
+| 24 | 20.3323 | 3485 | 20.3323 | 20.3454 | +1.6 % |
+| 32 | 20.2064 | 3463 | 20.2056 | 20.2198 | +0.95 % |
+| 48 | 20.0929 | 3530 | 20.0922 | 20.1053 | +0.39 % |
+| 96 | 20.0389 | 14084 | 20.0307 | 20.0379 | +0.12 % |
+| 192 | 20.0283 | 56299 | 20.0190 | | +0.07 % |
 
 "Converged": ~20.015-20.025 (Richardson, order 2, of N = 96 and 192: 20.015 from Tsit5,
 20.025 from RATTLE; below N ~ 50 the mesh does not resolve the fold, h > s0, and the
@@ -312,8 +310,7 @@ def snap_speed(scene, direction="up", *, nudge=NUDGE, past=1e-3, dt=None, t1=2.0
     opts = _options(scene, direction, nudge, past, dt, t1, n_fine, solver, max_drift)
     if any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(scene)):
         # already inside a transformation (the caller's jit / jacfwd compiles it): no nested
-        # jit of its own (measured: tracing jit(jacfwd(snap_speed)) at N = 16 took 17.4 s
-        # instead of 19.6 s)
+        # jit of its own (it would only add tracing time)
         return _speed(scene, opts=opts)
     return _speed_jit(scene, opts)
 

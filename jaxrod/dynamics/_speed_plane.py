@@ -6,7 +6,7 @@ strip `make_scene(psi0, gap, 0, s0=s0, n=n)` (or, with `creases`, a crease of fo
 psi0 at each given position), all points run by [`jaxrod.sweep`][] across
 every device JAX sees (and every process after `jax.distributed.initialize()`), resumable
 from `out`. The paper fits $v_s/v^\ast = v_m - a\,G/L - b\,\Psi_0$ to such points
-(MODEL.md); `fit_speed_plane` does the same least-squares fit.
+(docs/model.md); `fit_speed_plane` does the same least-squares fit.
 """
 
 from __future__ import annotations

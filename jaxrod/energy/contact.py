@@ -421,8 +421,8 @@ def _live_pairs(theta, scene, d):
     if K == p.size:
         return assemble(zero, jnp.arange(p.size), np.ones(p.size, bool))
     # the pairs whose energy can be nonzero (the others have zero energy, gradient and
-    # Hessian), compacted in order: O(P), where a top-K selection by distance sorted all P
-    # pairs (2.2 of the contact Hessian's 4.9 ms at N = 100)
+    # Hessian), compacted in order: O(P), where a top-K selection by distance would sort all P
+    # pairs (a large part of the contact Hessian's time; benchmarks/bench_contact.py times it)
     live = _may_interact(z, c.thickness)
     count = jnp.sum(live)
     chunks = -(-p.size // K)
@@ -524,7 +524,7 @@ def _overlapping_pairs_touch(x, tol, min_separation):
     count = jnp.sum(overlap)
     k = min(OVERLAP_PAIRS, n * n)
     # the overlapping pairs are the largest entries of the mask: `top_k` picks all of them
-    # where there are at most k (8x faster on XLA:CPU than `jnp.nonzero` with a size)
+    # where there are at most k (faster on XLA:CPU than `jnp.nonzero` with a size)
     _, flat = lax.top_k(overlap.astype(jnp.float32), k)
     i, j = flat // n, flat % n
     d, crosses = _component_distances(x[i, 0], x[i, 1], x[i + 1, 0], x[i + 1, 1],
@@ -554,8 +554,8 @@ def self_intersects(theta, scene, tol=None, *, force=None, min_separation: int =
     # the second screen only where the first fails (most states pass the first): the pairs
     # whose bounding boxes come within `tol`, of which the first `OVERLAP_PAIRS` are measured
     # (only they can be within `tol`); every pair only where more overlap. Loops of at most
-    # one pass one after the other, not one inside the other (nested, under `vmap`, they ran
-    # 10x slower than either alone)
+    # one pass one after the other, not one inside the other (nested, under `vmap`, they run
+    # much slower than either alone)
     tol = jnp.asarray(tol, x.dtype)
     near, many = run_if(~monotone, functools.partial(_overlapping_pairs_touch, min_separation=min_separation),
                         (no, no), (x, tol))

@@ -4,20 +4,21 @@ r"""Linear solves that stay correct, fast and deadlock-free under `vmap` on XLA:
 are LAPACK custom calls. Batched (under `vmap`) they split the batch over the CPU thread
 pool and wait for the pieces (jaxlib's `ParallelBatchMap`). When two such calls run at
 once -- the snap-up and snap-down paths of `snap_angles` are independent, so XLA runs
-them concurrently on the two threads of a 2-core machine -- each waits for pieces queued
-behind the other and the program deadlocks (seen 2026-12-02 with a `gdb` backtrace:
-both `tf_XLAEigen` threads in `jax::ParallelBatchMap` under `LuDecomposition` resp.
-`gtsv`, from a `vmap` of 41 `snap_angles` at N = 100 and of 256 equilibrium solves).
+them concurrently on the pool's threads -- on a machine with few cores each waits for
+pieces queued behind the other and the program deadlocks (a `gdb` backtrace shows every
+`tf_XLAEigen` thread in `jax::ParallelBatchMap` under `LuDecomposition` resp. `gtsv`; a
+`vmap` of 41 `snap_angles` at N = 100 or of 256 equilibrium solves reproduces it;
+docs/limitations.md).
 
-**What.** Unbatched, the wrappers below call the same LAPACK routines as before (same
-numbers, same speed). Batched:
+**What.** Unbatched, the wrappers below call the same LAPACK routines as the JAX functions
+they wrap (same numbers, same speed). Batched:
 
 * [`tridiagonal_solve`][]: a batch small enough for jaxlib to run inline (`INLINE_WORK`,
-  e.g. the 3-4 members of jaxrod's own internal `vmap`s) is one batched `gtsv` as before;
+  e.g. the 3-4 members of jaxrod's own internal `vmap`s) is one batched `gtsv`, as in JAX;
   a larger one below `SCAN_BATCH` loops over the members (one unbatched `gtsv` each);
   from `SCAN_BATCH` on, Gaussian elimination with partial pivoting (`gtsv`'s algorithm)
   runs as two `lax.scan`s over the rows, vectorized over the batch, whose cost is nearly
-  flat in the batch size (2.3x faster than the loop at B = 205). Nested `vmap`s merge
+  flat in the batch size (so it beats the loop on large batches). Nested `vmap`s merge
   their batch axes and choose again;
 * [`solve`][] (dense) and [`eigh`][] run the members one after another
   (`jax.custom_batching.sequential_vmap`), each an unbatched LAPACK LU or `syevd`.
@@ -101,11 +102,10 @@ def _broadcast(axis_size, in_batched, args):
 # (jaxlib/cpu/lapack_kernels.cc: GetLapackBatchChunkSize). Half of that, for margin:
 INLINE_WORK = 100_000
 # batches from this size on use the scan; smaller ones loop over unbatched LAPACK calls.
-# Measured at N = 100, 3 right-hand sides, per batched solve inside a compiled loop
-# (2026-12-02, 2 cores): B = 4: loop 13.7 us, scan 81 us (batched LAPACK 12.4 us);
-# B = 41: 137 / 116 us; B = 205: 716 / 310 us. The scan's cost is nearly flat in B: XLA:CPU
-# runs a loop over vectors op by op (~0.4 us per row step) but a loop over scalars, as in
-# the unbatched scan, in one kernel (3.7 us per solve).
+# The loop's cost grows linearly in the batch size B, the scan's is nearly flat in B (XLA:CPU
+# runs a loop over vectors op by op, but a loop over scalars, as in the unbatched scan, in
+# one kernel): the loop is cheaper for a few members, the scan from a few dozen on (at
+# N = 100, 3 right-hand sides, per batched solve inside a compiled loop).
 SCAN_BATCH = 48
 
 

@@ -1,6 +1,6 @@
 r"""Geometry, material, clamps and discretization of a creased planar strip.
 
-Conventions (see MODEL.md): arclength $s\in[0,L]$, tangent angle $\theta(s)$,
+Conventions (see docs/model.md): arclength $s\in[0,L]$, tangent angle $\theta(s)$,
 $\mathbf r'(s) = (\cos\theta, \sin\theta)$. The crease is the natural tangent angle
 
 $$\theta_0(s) = \frac{\Psi_0-\pi}{2}\tanh\frac{s-L/2}{s_0},$$
@@ -41,7 +41,7 @@ def _crease_profile(s, centre, psi, width):
 class Creases(eqx.Module):
     r"""A set of $m$ creases: crease $k$ at arclength $c_k$ (a length, in $(0, L)$) with
     fold angle $\Psi_k$ (radians, interior angle, in $(0,\pi]$) and fold width $s_{0,k}$.
-    Each adds the single-crease profile of MODEL.md centred at its own $c_k$ to the
+    Each adds the single-crease profile of docs/model.md centred at its own $c_k$ to the
     strip's natural tangent angle,
 
     $$\theta_0(s) \mathrel{+}= \sum_k \frac{\Psi_k-\pi}{2}\tanh\frac{s-c_k}{s_{0,k}},$$
@@ -187,7 +187,7 @@ class Strip(eqx.Module):
       + \sum_k \frac{\Psi_k-\pi}{2}\tanh\frac{s-c_k}{s_{0,k}}.$$
 
     A strip of creases elsewhere leaves `psi0` at $\pi$ (no centred crease; that term is
-    then exactly zero). Defaults are the nondimensional units of MODEL.md:
+    then exactly zero). Defaults are the nondimensional units of docs/model.md:
     $L=B=\lambda=1$, $s_0=0.02L$.
     """
 

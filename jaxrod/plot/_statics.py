@@ -4,7 +4,7 @@ Matplotlib is imported lazily, inside the functions, so `import jaxrod` stays ch
 never touches the user's matplotlib backend. Functions that write files draw on an
 off-screen Agg canvas of their own (no `pyplot`, no global backend switch).
 
-Clamps follow MODEL.md: the left clamp holds $\mathbf r(0)=(0,0)$ with tangent angle
+Clamps follow docs/model.md: the left clamp holds $\mathbf r(0)=(0,0)$ with tangent angle
 $\theta(0)=+\alpha_L$, the right clamp holds $\mathbf r(L)=(G,0)$ with
 $\theta(L)=-\alpha_R$. Each clamp is drawn as a hatched block lying on the clamp
 tangent, outside the strip: behind $s=0$ on the left, beyond $s=L$ on the right.

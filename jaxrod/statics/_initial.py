@@ -1,6 +1,6 @@
 r"""Up and down states built on their own, by homotopy from the flat buckled strip.
 
-MODEL.md: the up and down states need not be connected by continuation in alpha, so
+The up and down states need not be connected by continuation in alpha (docs/model.md), so
 each is built from the flat strip ($\Psi_0=\pi$, $\alpha=0$) buckled up or down at the
 requested gap, then deformed to the requested $(\Psi_0,\alpha_L,\alpha_R)$ (and
 gravity) in `steps` Newton-minimization steps. Three deformation paths are tried in

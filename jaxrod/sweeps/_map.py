@@ -17,9 +17,10 @@ Two ways to split (the `mode`):
   over the whole batch, so every device iterates until the slowest member anywhere is
   done (an all-reduce per iteration).
 
-Both give identical numbers. `benchmarks/bench_sweep.py` measures them side by side: on
-2 CPU cores the phase diagram ran 2.1x faster than one device with `"shard_map"` over 2
-devices, and 2.8x slower than one device with `"sharding"`.
+Both give identical numbers. `benchmarks/bench_sweep.py` measures them side by side
+(`benchmarks/results/sweep.md`): on a phase diagram `"shard_map"` over several devices runs
+faster than one device, and `"sharding"` slower than one device (its devices wait for the
+slowest member anywhere).
 
 A batch holds `size = devices x per_device` members; `__call__` pads a shorter one by
 repeating its last member and drops the padding from the result.
