@@ -27,6 +27,7 @@ import jax.numpy as jnp  # noqa: E402
 
 import jaxrod as jr  # noqa: E402
 from jaxrod import design as D  # noqa: E402
+from jaxrod import paper  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -45,7 +46,7 @@ def step_costs(ns, t1=1.5):
         eq = jr.initial_state(sc, "down")
         prog = D.two_knot_program((70.0, 0.0))
         for label, bodies in [("far ball (no contact)", jr.Bodies([jr.Ball("far", (5.0, 5.0), 0.04, 0.05)])),
-                              ("three balls (Fig. 4)", D.fig4_bodies())]:
+                              ("three balls (Fig. 4)", paper.fig4_bodies())]:
             _, first = timed(lambda: jr.actuate(sc, bodies, prog, theta0=eq.theta, t1=t1))
             a, run = timed(lambda: jr.actuate(sc, bodies, prog, theta0=eq.theta, t1=t1))
             steps = int(a.num_steps)
@@ -63,7 +64,7 @@ def step_costs(ns, t1=1.5):
 def design_iteration(n=16, t1=2.4):
     sc = jr.make_scene(60.0, 0.5, n=n)
     eq = jr.initial_state(sc, "down")
-    bodies = D.fig4_bodies()
+    bodies = paper.fig4_bodies()
 
     def loss(p):
         a = jr.actuate(sc, bodies, D.two_knot_program(p), theta0=eq.theta, t1=t1)
@@ -89,13 +90,13 @@ def main():
     res["steps"] = step_costs(ns)
     res["design_iteration"] = design_iteration()
     tic = time.perf_counter()
-    study = D.fig4_study()
+    study = paper.fig4_study()
     res["fig4"] = dict(seconds=time.perf_counter() - tic, confirmed=study.confirmed, stage_speeds=study.stage_speeds,
                        designs=[dict(target=d.target, peaks_deg=d.peaks_deg, iterations=d.iterations,
                                      seconds=d.seconds, speeds=d.speeds, check=d.check, reached=d.reached,
                                      confirmed=d.confirmed, codes=d.codes) for d in study.designs])
     s = study.sequence
-    _, seq_run = timed(lambda: jr.actuate(jr.make_scene(60.0, 0.5, n=study.n_check), D.fig4_bodies(),
+    _, seq_run = timed(lambda: jr.actuate(jr.make_scene(60.0, 0.5, n=study.n_check), paper.fig4_bodies(),
                                           D.sequence_program([d.peaks_deg for d in study.designs])))
     res["sequence"] = dict(n=study.n_check, run_s=seq_run, steps=int(s.num_steps), result=jr.result_name(s.result),
                            energy_error=float(s.energy_error), hits=s.hits(),

@@ -48,6 +48,7 @@ import numpy as np  # noqa: E402
 
 import jaxrod.design as ds  # noqa: E402
 import jaxrod as jr  # noqa: E402
+import jaxrod.paper as paper  # noqa: E402
 from jaxrod.design._optimize import _linearize_batch  # noqa: E402
 
 
@@ -181,14 +182,14 @@ def run_studies():
         print("study", rows[-1], flush=True)
 
     t = time.perf_counter()
-    a = ds.snap_angle_study(progress=False)
+    a = paper.snap_angle_study(progress=False)
     d = a.design
     row("(a) alpha_c = 60 / -70 deg", time.perf_counter() - t,
         int(a.coarse.best.num_iterations) + int(d.num_iterations), a.reached,
         f"Psi0 {d.psi0_deg:.3f} deg, G/L {d.gap:.5f}",
         f"{a.verification.alpha_up_deg:.4f} / {a.verification.alpha_down_deg:.4f} deg at N = {a.verification.n}")
-    for name, fn in (("(b) fastest snap, G/L >= 0.3", ds.fastest_snap_study),
-                     ("(c) v_s = 20 v* at Psi0 = 90 deg", ds.snap_speed_study)):
+    for name, fn in (("(b) fastest snap, G/L >= 0.3", paper.fastest_snap_study),
+                     ("(c) v_s = 20 v* at Psi0 = 90 deg", paper.snap_speed_study)):
         t = time.perf_counter()
         r = fn(progress=False)
         v = r.verification
@@ -199,7 +200,7 @@ def run_studies():
                 f"; Psi0 polish {pl['psi0_before']:.3f} -> {pl['psi0_after']:.3f} deg, v_s {pl['v_s_before']:.4f} -> "
                 f"{pl['v_s_after']:.4f} ({pl['evaluations']} evaluations)" if pl else ""))
     t = time.perf_counter()
-    r = ds.actuator_study()
+    r = paper.actuator_study()
     row("(d) programmed actuator", time.perf_counter() - t, len(r.history), r.reached,
         f"Psi0 {r.psi0_deg:g} deg, G/L {r.gap:g}, beta {r.beta_deg:.3f} deg", r.outcome)
     return rows

@@ -3,19 +3,19 @@
 Objectives (`AlphaUp`, `AlphaDown`, `Hysteresis`, `FoldHeight`, `BendingEnergy`, `Snaps`,
 `SnapSpeed`), a feasible parametrization (`Parametrization`), multi-start optimization
 (`optimize`, Levenberg-Marquardt or optax), results that save and reload
-(`DesignResult.save` / `.load`), differentiable critical angles (`critical_angles`) and the
-design studies (`snap_angle_study`, ...), crease positions and angles as design variables
-(`CreaseParametrization`, `two_crease_study`, `crease_position_study`), and the statistics of
-the snap angles under manufacturing scatter (`Scatter`, `scatter_statistics`, `scatter_mean`) and
-under imperfections (`imperfection_sensitivity`), and robust design at a quantile of the scatter
-(`robust_design`). float64 must be
-enabled by the caller.
+(`DesignResult.save` / `.load`), differentiable critical angles (`critical_angles`), crease
+positions and angles as design variables (`CreaseParametrization`, `crease_scene`) and the gap
+for a snap speed (`crease_gap_for_speed`), clamp programs designed by gradient
+(`design_program`, `sequence_program`), and the statistics of the snap angles under
+manufacturing scatter (`Scatter`, `scatter_statistics`, `scatter_mean`) and under
+imperfections (`imperfection_sensitivity`), and robust design at a quantile of the scatter
+(`robust_design`). float64 must be enabled by the caller.
+
+The paper's studies and figures built on these tools (`snap_angle_study`, `fig4_study`,
+`two_crease_study`, ...) are in `jaxrod.paper`; their old names here still resolve, with a
+`DeprecationWarning`.
 """
 
-from ._actuator import actuator_study as actuator_study
-from ._actuator import ActuatorResult as ActuatorResult
-from ._actuator import half_heights as half_heights
-from ._actuator import half_state as half_state
 from ._critical import Critical as Critical
 from ._critical import critical_angles as critical_angles
 from ._critical import design_scene as design_scene
@@ -30,32 +30,15 @@ from ._objectives import Snaps as Snaps
 from ._objectives import SnapSpeed as SnapSpeed
 from ._objectives import Term as Term
 from ._optimize import DesignResult as DesignResult
+from ._optimize import linearize as linearize
 from ._optimize import MultiStartResult as MultiStartResult
 from ._optimize import optimize as optimize
 from ._optimize import Problem as Problem
 from ._optimize import STATUS as STATUS
 from ._params import Parametrization as Parametrization
-from ._studies import fastest_snap_study as fastest_snap_study
-from ._studies import snap_angle_study as snap_angle_study
-from ._studies import snap_speed_study as snap_speed_study
-from ._studies import StudyResult as StudyResult
-from ._studies import verify_snap_angles as verify_snap_angles
-from ._studies import SpeedStudyResult as SpeedStudyResult
-from ._studies import SpeedVerification as SpeedVerification
-from ._studies import verify_snap_speed as verify_snap_speed
 from ._programs import descend as descend
 from ._programs import design_program as design_program
-from ._programs import Fig4Result as Fig4Result
-from ._programs import fig4_bodies as fig4_bodies
-from ._programs import fig4_objects_json as fig4_objects_json
-from ._programs import fig4_study as fig4_study
 from ._programs import ProgramDesign as ProgramDesign
-from ._programs import FIG4_N as FIG4_N
-from ._programs import FIG4_N_CHECK as FIG4_N_CHECK
-from ._programs import FIG4_PEAKS as FIG4_PEAKS
-from ._programs import FIG4_PROGRAMS as FIG4_PROGRAMS
-from ._programs import FIG4_V_LAUNCH as FIG4_V_LAUNCH
-from ._programs import FIG4_V_SPARE as FIG4_V_SPARE
 from ._programs import remaining_bodies as remaining_bodies
 from ._programs import SEQUENCE_TIMING as SEQUENCE_TIMING
 from ._programs import sequence_program as sequence_program
@@ -80,10 +63,52 @@ from ._scatter import score_gradient as score_gradient
 from ._creases import check_creases as check_creases
 from ._creases import crease_gap_for_speed as crease_gap_for_speed
 from ._creases import CreaseGapResult as CreaseGapResult
-from ._creases import crease_position_study as crease_position_study
 from ._creases import crease_scene as crease_scene
 from ._creases import CreaseCheck as CreaseCheck
 from ._creases import CreaseParametrization as CreaseParametrization
-from ._creases import PositionResult as PositionResult
-from ._creases import two_crease_study as two_crease_study
-from ._creases import TwoCreaseResult as TwoCreaseResult
+
+
+# The paper's studies, its Fig. 4 scene and the crease studies moved to `jaxrod.paper`. Their
+# old names resolve there on first use, with a DeprecationWarning; `jaxrod.paper` is imported
+# only then (it sits above this package).
+_MOVED_TO_PAPER = frozenset({
+    "actuator_study",
+    "ActuatorResult",
+    "crease_position_study",
+    "fastest_snap_study",
+    "fig4_bodies",
+    "FIG4_N",
+    "FIG4_N_CHECK",
+    "fig4_objects_json",
+    "FIG4_PEAKS",
+    "FIG4_PROGRAMS",
+    "fig4_study",
+    "FIG4_V_LAUNCH",
+    "FIG4_V_SPARE",
+    "Fig4Result",
+    "half_heights",
+    "half_state",
+    "PositionResult",
+    "snap_angle_study",
+    "snap_speed_study",
+    "SpeedStudyResult",
+    "SpeedVerification",
+    "StudyResult",
+    "two_crease_study",
+    "TwoCreaseResult",
+    "verify_snap_angles",
+    "verify_snap_speed",
+})
+
+
+def __getattr__(name):
+    """A name that moved to `jaxrod.paper` (`_MOVED_TO_PAPER`): `jaxrod.paper`'s object, with a
+    `DeprecationWarning` naming its new place."""
+    if name in _MOVED_TO_PAPER:
+        import importlib
+        import warnings
+
+        warnings.warn(f"jaxrod.design.{name} moved to jaxrod.paper.{name}; import it from jaxrod.paper",
+                      DeprecationWarning, stacklevel=2)
+        return getattr(importlib.import_module("jaxrod.paper"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -156,6 +156,16 @@ def auto_batch_size():
     return 1 if jax.default_backend() == "cpu" else None
 
 
+def linearize(problem: Problem, z, *, batch_size: int | str | None = "auto"):
+    """`Problem.linearize` at the designs `z` (shape (B, P), unconstrained): `(r, J, values,
+    codes)`, each with a leading axis B. The evaluation `optimize` runs once per iteration
+    (its snap paths walked from the start, without the warm start of `near`), batched as
+    `optimize`'s `batch_size` says (the same choices and default)."""
+    if isinstance(batch_size, str) and batch_size == "auto":
+        batch_size = auto_batch_size()
+    return _linearize(problem, jnp.asarray(z), batch_size)
+
+
 def _loss(r):
     with np.errstate(over="ignore", invalid="ignore"):
         loss = 0.5 * np.sum(r**2, axis=-1)
@@ -475,4 +485,4 @@ def optimize(terms, param: Parametrization | None = None, z0=None, *, n: int = 4
                             num_reached=int(reached.sum()), num_starts=int(z0.shape[0]), wall_time=wall)
 
 
-__all__ = ["optimize", "Problem", "DesignResult", "MultiStartResult", "STATUS", "NAMES"]
+__all__ = ["optimize", "linearize", "Problem", "DesignResult", "MultiStartResult", "STATUS", "NAMES"]

@@ -1,7 +1,9 @@
-"""Small helpers: input validation on concrete values and dtype handling."""
+"""Small helpers: input validation on concrete values, dtype handling, the package's version
+and a digest of its source."""
 
 from __future__ import annotations
 
+import functools
 import math
 
 import equinox as eqx
@@ -125,6 +127,22 @@ def package_version() -> str:
         return importlib.metadata.version("jaxrod")
     except importlib.metadata.PackageNotFoundError:
         return "0.0.0"
+
+
+@functools.lru_cache(maxsize=1)
+def source_digest() -> str:
+    """SHA-256 of jaxrod's source (the path and bytes of every `.py` file of the package): the
+    key of what the command line's exported programs and `jaxrod reproduce`'s cache hold, so
+    that anything computed by other code is not reused."""
+    import hashlib
+    import pathlib
+
+    root = pathlib.Path(__file__).parent
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(str(path.relative_to(root)).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
 
 
 def check_grid(psi0_deg, gaps, s0, what: str):

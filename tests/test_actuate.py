@@ -312,10 +312,10 @@ def test_program_loss_is_zero_exactly_inside_the_goal():
     assert float(_loss(v, far.at[0].set(0.0095), 0.0, 2, 5.0, 1.0, per_ball, 0.1)) > 0
     g = jax.grad(lambda m: _loss(v, m, 0.0, 2, 5.0, 1.0, per_ball, 0.1))(far.at[0].set(0.0095))
     assert np.all(np.isfinite(np.asarray(g))) and float(g[0]) > 0 and float(g[1]) == 0.0
-    from jaxrod import design
+    from jaxrod import design, paper
 
     with pytest.raises(ValueError, match=r"d_spare: unknown balls \['middle'\]"):
-        design.design_program(jr.make_scene(60.0, 0.5, n=N), design.fig4_bodies(), "right", (50.0, -40.0),
+        design.design_program(jr.make_scene(60.0, 0.5, n=N), paper.fig4_bodies(), "right", (50.0, -40.0),
                               d_spare={"middle": 0.01})
 
 
@@ -352,7 +352,7 @@ def test_design_program_scan_descent_and_result(monkeypatch, scene):
     result carries the design, its speeds and the re-check's outcome and codes."""
     import types
 
-    from jaxrod import design
+    from jaxrod import design, paper
     from jaxrod.design import _programs
 
     def toy(scene, bodies, p, theta0, t1, target):  # the right ball at p_L / 5 v*, the others still
@@ -369,7 +369,7 @@ def test_design_program_scan_descent_and_result(monkeypatch, scene):
                                      result=jr.RESULTS.successful)
 
     monkeypatch.setattr(jr, "actuate", check_run)
-    d = design.design_program(scene, design.fig4_bodies(), "right", (10.0, 0.0), lr=3.0, steps=30, n_check=24,
+    d = design.design_program(scene, paper.fig4_bodies(), "right", (10.0, 0.0), lr=3.0, steps=30, n_check=24,
                               scan_deg=15.0, scan_size=3)
     assert d.history[0] == pytest.approx((5.5 - 5.0) ** 2 / 25.0)  # the scan's best: p_L = 25, 5 v*
     assert d.reached and d.history[-1] == 0.0 and d.peaks_deg[0] >= 27.5 and d.iterations >= 1
@@ -384,9 +384,9 @@ def test_designed_program_launches_its_target_and_spares_the_others():
     """From a program that misses the goal, Adam on the gradient through the run (no scan)
     finds one that launches the right ball faster than 5 v* and leaves the others below
     1.2 v*; an independent run at N = 48 confirms it."""
-    from jaxrod import design
+    from jaxrod import design, paper
 
-    d = design.design_program(jr.make_scene(60.0, 0.5, n=32), design.fig4_bodies(), "right", (50.0, -40.0),
+    d = design.design_program(jr.make_scene(60.0, 0.5, n=32), paper.fig4_bodies(), "right", (50.0, -40.0),
                               v_launch=5.0, v_spare=1.2, steps=12, n_check=48)
     assert d.reached and d.confirmed, d
     assert d.history[0] > 1.0 and d.history[-1] == 0.0 and d.iterations >= 2
@@ -438,9 +438,9 @@ def _fake_run(names, t, speeds, final_positions, final_speed=0.0, clearance=None
 
 
 def test_remaining_balls_and_per_program_speeds():
-    from jaxrod import design
+    from jaxrod import design, paper
 
-    b = design.fig4_bodies()
+    b = paper.fig4_bodies()
     run = _fake_run(b.names, np.linspace(0, 1, 5), np.zeros((5, 3)), [[0.0, 0.2], [0.3, 0.5], [9.0, 0.1]])
     left = design.remaining_bodies(b, run, ["right"])
     assert left.names == ("left", "centre")
@@ -466,6 +466,20 @@ def test_remaining_balls_and_per_program_speeds():
     assert all(o == pytest.approx(w, abs=1e-12) for o, w in zip(out, want))
 
 
+def test_stage_outcome_defaults_are_the_fig4_goal():
+    """`jaxrod.design.stage_outcome` judges a program by the paper's Fig. 4 goal unless told
+    otherwise: its default speeds are `jaxrod.paper.FIG4_V_LAUNCH` and `FIG4_V_SPARE`."""
+    import inspect
+
+    from jaxrod import design, paper
+
+    defaults = inspect.signature(design.stage_outcome).parameters
+    assert defaults["v_launch"].default == paper.FIG4_V_LAUNCH
+    assert defaults["v_spare"].default == paper.FIG4_V_SPARE
+    assert design.stage_outcome({"left": 0.5, "right": 5.0}, "right") == (["right"], True, True)
+    assert design.stage_outcome({"left": 1.3, "right": 5.0}, "right") == (["right"], False, False)
+
+
 def _fake_actuate(seen, speeds):
     """A stand-in for `jr.actuate` that records its scene's mesh, balls, program and t1 in
     `seen` and returns a run with the ball speeds `speeds` (5 samples, 3 balls)."""
@@ -486,9 +500,9 @@ def _fake_actuate(seen, speeds):
 
 def test_cli_actuate_mesh_and_balls_defaults(monkeypatch, tmp_path, capsys):
     """`jaxrod actuate`: a program file runs on N = 24 unless --n says otherwise, paper-fig4 on
-    the Fig. 4 re-check mesh; without --objects, the balls are `jaxrod.design.fig4_bodies`;
+    the Fig. 4 re-check mesh; without --objects, the balls are `jaxrod.paper.fig4_bodies`;
     `--frames` sets the animation's frames (at least 2)."""
-    from jaxrod import design
+    from jaxrod import paper
     from jaxrod.cli._main import main
 
     seen = {}
@@ -500,8 +514,8 @@ def test_cli_actuate_mesh_and_balls_defaults(monkeypatch, tmp_path, capsys):
         main(["actuate", *argv, "--json"])
         capsys.readouterr()
         assert seen["n"] == n, argv
-    np.testing.assert_allclose(seen["position"], np.asarray(design.fig4_bodies().position))
-    assert seen["names"] == design.fig4_bodies().names and seen["n_frames"] == 96
+    np.testing.assert_allclose(seen["position"], np.asarray(paper.fig4_bodies().position))
+    assert seen["names"] == paper.fig4_bodies().names and seen["n_frames"] == 96
     main(["actuate", "--program", str(prog), "--frames", "300", "--json"])
     assert seen["n_frames"] == 300
     capsys.readouterr()
@@ -514,7 +528,7 @@ def test_cli_paper_fig4_reports_each_program(monkeypatch, capsys):
     """`jaxrod actuate --program paper-fig4`: the designed peaks in sequence on the three balls;
     per program the balls it launched and whether it spared the others (a stand-in run: the
     real one is the nightly test below); exit 3 when a program launches the wrong ball."""
-    from jaxrod import design
+    from jaxrod import design, paper
     from jaxrod.cli._main import main
 
     seen = {}
@@ -526,9 +540,9 @@ def test_cli_paper_fig4_reports_each_program(monkeypatch, capsys):
     monkeypatch.setattr(jr, "actuate", fake(good))
     assert main(["actuate", "--program", "paper-fig4", "--json"]) == 0
     rec = json.loads(capsys.readouterr().out)
-    assert seen["names"] == ("left", "centre", "right") and seen["n"] == design.FIG4_N_CHECK == 48
+    assert seen["names"] == ("left", "centre", "right") and seen["n"] == paper.FIG4_N_CHECK == 48
     assert seen["t1"] == pytest.approx(13.4)
-    want = design.sequence_program(design.FIG4_PEAKS)
+    want = design.sequence_program(paper.FIG4_PEAKS)
     np.testing.assert_allclose(np.asarray(seen["program"].alpha_left), np.asarray(want.alpha_left))
     assert [q["launched"] for q in rec["programs"]] == [["right"], ["left"], ["centre"]]
     assert [q["target"] for q in rec["programs"]] == ["right", "left", "centre"]
@@ -567,11 +581,11 @@ def test_fig4_study_designs_the_sequence_it_ships():
     and leaves the others below 1.2 v*; B is A's mirror image (the scene is symmetric and A
     leaves the left and centre balls in place), to the launch speed; the peaks are those
     `FIG4_PEAKS` ships to the CLI."""
-    from jaxrod import design
+    from jaxrod import paper
 
-    r = design.fig4_study()
+    r = paper.fig4_study()
     assert [d.target for d in r.designs] == ["right", "left", "centre"]
-    np.testing.assert_allclose([d.peaks_deg for d in r.designs], design.FIG4_PEAKS, atol=1e-6)
+    np.testing.assert_allclose([d.peaks_deg for d in r.designs], paper.FIG4_PEAKS, atol=1e-6)
     assert [list(s) for s in r.stage_speeds] == [["left", "centre", "right"], ["left", "centre"], ["centre"]]
     assert r.confirmed and jr.result_name(r.sequence.result) == "successful"
     for d, sp in zip(r.designs, r.stage_speeds):

@@ -1,4 +1,4 @@
-"""Study (d), the programmable actuator (design/_actuator.py): the left-only / right-only /
+"""Study (d), the programmable actuator (jaxrod/paper/_actuator.py): the left-only / right-only /
 both program does what it says quasi-statically, re-checked independently at a finer mesh and
 dynamically; the gradients it uses match central differences; impossible programs end in a
 clear "not reached".
@@ -10,9 +10,9 @@ import math
 import numpy as np
 import pytest
 
-import jaxrod.design as ds
 import jaxrod as jr
-from jaxrod.design import _actuator as act
+import jaxrod.paper as paper
+from jaxrod.paper import _actuator as act
 
 
 PSI0, GAP, BETA = 45.0, 0.5, -126.0  # BETA: close to the optimum of the held angle (-126.26 deg at N = 40)
@@ -144,7 +144,7 @@ def test_optimized_held_angle():
 def test_flat_held_clamp_is_not_a_selective_actuator():
     """With the other clamp held flat (beta = 0, the protocol of snap_dynamics(kind='asymmetric'))
     the one-sided snap flips both halves (DD -> UU): the study says "not reached" at step 1."""
-    r = ds.actuator_study(PSI0, GAP, 0.0, optimize=False, dynamics=False, check_gradients=False, n=N,
+    r = paper.actuator_study(PSI0, GAP, 0.0, optimize=False, dynamics=False, check_gradients=False, n=N,
                           n_check=N_CHECK)
     assert not r.reached
     assert r.outcome.startswith("not reached: N = 24 step 1 (left half only")
@@ -154,7 +154,7 @@ def test_flat_held_clamp_is_not_a_selective_actuator():
 def test_nothing_snaps_is_not_reached():
     """A tight fold at a large gap (Psi0 = 30 deg, G/L = 0.85) has no down state / no snap: the
     study stops with "not reached" instead of returning a program."""
-    r = ds.actuator_study(30.0, 0.85, -90.0, optimize=False, dynamics=False, check_gradients=False, n=N,
+    r = paper.actuator_study(30.0, 0.85, -90.0, optimize=False, dynamics=False, check_gradients=False, n=N,
                           n_check=N_CHECK)
     assert not r.reached and r.waypoints is None and r.outcome.startswith("not reached")
 
@@ -163,7 +163,7 @@ def test_nothing_snaps_is_not_reached():
 def test_actuator_study_converged():
     """The full study at its defaults (held angle optimized at N = 40, check at N = 80, dynamics at
     N = 32) is reached; at N = 160 the same waypoints still do what they say."""
-    r = ds.actuator_study()
+    r = paper.actuator_study()
     assert r.reached, r.summary()
     assert r.info["local_max"] and r.info["m1"] > 0.1
     assert all(g.rel_error < 1e-5 for g in r.gradients), r.gradients

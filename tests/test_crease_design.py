@@ -1,6 +1,6 @@
 """Crease positions and fold angles as design variables (`jaxrod.design._creases`): the
 parametrization, bad input, the snap speed's gradient in the crease set, and the two studies
-(nightly: each compiles the derivatives of a whole snap path or snap)."""
+of `jaxrod.paper` (nightly: each compiles the derivatives of a whole snap path or snap)."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ import pytest
 
 import jaxrod as jr
 import jaxrod.design as jd
+import jaxrod.paper as paper
 from helpers import central_difference
 
 
@@ -42,14 +43,14 @@ def test_parametrization_bad_input(kwargs, match):
 ])
 def test_position_study_bad_input(kwargs, match):
     with pytest.raises(ValueError, match=match):
-        jd.crease_position_study(**kwargs)
+        paper.crease_position_study(**kwargs)
 
 
 def test_two_crease_study_bad_input():
     with pytest.raises(ValueError, match="gap"):
-        jd.two_crease_study(gap=0.0)
+        paper.two_crease_study(gap=0.0)
     with pytest.raises(ValueError, match="alpha_up_deg"):
-        jd.two_crease_study(alpha_up_deg=float("inf"))
+        paper.two_crease_study(alpha_up_deg=float("inf"))
 
 
 def test_crease_scene_places_the_creases():
@@ -83,7 +84,7 @@ def test_two_crease_study_reaches_targets_and_speeds_up():
     mesh while v_s grows (measured 9.98 -> 28.16 v* in 12 steps), the snap keeps the strip
     0.01 L clear of itself; the independent check at 2N is clean and agrees on v_s to 2 % and
     on the angles to the design mesh's discretization error (measured 0.26 deg at N = 48)."""
-    r = jd.two_crease_study(55.0, -110.0, gap=0.5, n=48, n_check=96, steps=8, progress=False)
+    r = paper.two_crease_study(55.0, -110.0, gap=0.5, n=48, n_check=96, steps=8, progress=False)
     assert r.reached and r.snap_clearance >= 0.01
     assert abs(r.alpha_up_deg - 55.0) < 0.02 and abs(r.alpha_down_deg + 110.0) < 0.02
     assert r.v_s > 1.3 * r.v_s_start
@@ -98,7 +99,7 @@ def test_crease_position_study():
     """Psi0 = 120 deg, G/L = 0.5: W(c) = W(L - c) (mirror symmetry), and the widest loop is the
     centred crease (a cusp of W: its up path snaps at a branch point, any other at a fold),
     wider than the best interior position; the finer mesh agrees to 1 deg."""
-    r = jd.crease_position_study(120.0, 0.5, n=48, n_check=96, points=9, progress=False)
+    r = paper.crease_position_study(120.0, 0.5, n=48, n_check=96, points=9, progress=False)
     assert r.where == "centre" and r.position == 0.5
     assert r.centre_width_deg > r.interior_width_deg > max(w for w in r.widths_deg[:-1] if w is not None) - 1e-9
     assert abs((r.check.alpha_up_deg - r.check.alpha_down_deg) - r.width_deg) < 2.0
@@ -117,17 +118,17 @@ def _fake_studies(monkeypatch, calls, reached=True):
     def two(up, down, **kw):
         calls.append(("two", up, down, kw))
         chk = jd.CreaseCheck(kw["n_check"], up + 0.2, down - 0.3, 20.5, "successful")
-        return jd.TwoCreaseResult((up, down), kw["gap"], kw["n"], [0.3, 0.7], [80.0, 95.0], up + 0.01, down,
-                                  20.0, 10.0, 0.02, [], reached, kw["tol_deg"], chk, 1.0)
+        return paper.TwoCreaseResult((up, down), kw["gap"], kw["n"], [0.3, 0.7], [80.0, 95.0], up + 0.01, down,
+                                     20.0, 10.0, 0.02, [], reached, kw["tol_deg"], chk, 1.0)
 
     def position(psi0, gap, **kw):
         calls.append(("position", psi0, gap, kw))
         chk = jd.CreaseCheck(kw["n_check"], 80.0, -81.0, math.nan, "successful")
-        return jd.PositionResult(psi0, gap, kw["n"], [0.1, 0.5], [150.0, 161.0], 0.5, 161.0, "centre", 0.13, 159.9,
-                                 -1128.0, False, 161.0, chk, chk, 1.0)
+        return paper.PositionResult(psi0, gap, kw["n"], [0.1, 0.5], [150.0, 161.0], 0.5, 161.0, "centre", 0.13,
+                                    159.9, -1128.0, False, 161.0, chk, chk, 1.0)
 
-    monkeypatch.setattr(jd, "two_crease_study", two)
-    monkeypatch.setattr(jd, "crease_position_study", position)
+    monkeypatch.setattr(paper, "two_crease_study", two)
+    monkeypatch.setattr(paper, "crease_position_study", position)
 
 
 def test_cli_crease_studies(monkeypatch, capsys):

@@ -1,4 +1,5 @@
-"""Inverse design (`design/`): parametrization, objectives, optimizer, results, gradients.
+"""Inverse design (`design/`): parametrization, objectives, optimizer, results, gradients;
+the studies built on them (`jaxrod.paper`).
 
 Fast tests use fold-height objectives (one Newton solve per evaluation); the critical-angle
 checks compile `jaxrod.snap_angles` and its sensitivity (about a minute each) and are
@@ -15,6 +16,7 @@ import pytest
 
 import jaxrod.design as ds
 import jaxrod as jr
+import jaxrod.paper as paper
 from helpers import central_difference, count_compiles
 
 
@@ -83,7 +85,7 @@ def test_snap_speed_term_with_and_without_dynamics(monkeypatch):
     assert not ds.dynamics_available()
     with pytest.raises(NotImplementedError, match="dynamics"):
         ds.SnapSpeed(20.0)
-    for study in (ds.fastest_snap_study, ds.snap_speed_study):
+    for study in (paper.fastest_snap_study, paper.snap_speed_study):
         with pytest.raises(NotImplementedError, match="dynamics"):
             study(progress=False)
 
@@ -150,7 +152,7 @@ def test_result_save_and_load_roundtrip(multistart, tmp_path):
 
 
 def test_golden_max_finds_the_maximum_and_keeps_a_better_start():
-    from jaxrod.design._studies import golden_max
+    from jaxrod.paper._studies import golden_max
 
     f = lambda x: -(x - 26.5) ** 2 + 1e-4 * math.sin(40 * x)  # noqa: E731  (a max with small wiggles)
     x, v, evals = golden_max(f, 10.0, 60.0, xtol=0.05)
@@ -165,7 +167,7 @@ def test_psi0_polish_reaches_the_scanned_maximum_on_the_compiled_problem(multist
     """`_polish_psi0` (study (b)'s last step) maximizes the first term's value over Psi0 at the
     design's gap; here the fold height of the down state, cheap: checked against a scan."""
     from jaxrod.design._optimize import _linearize_batch
-    from jaxrod.design._studies import _polish_psi0
+    from jaxrod.paper._studies import _polish_psi0
 
     _, res = multistart
     b = res.best
@@ -182,6 +184,10 @@ def test_psi0_polish_reaches_the_scanned_maximum_on_the_compiled_problem(multist
         return float(np.asarray(_linearize_batch(problem, jnp.asarray(z)[None], 1)[2])[0, 0])
 
     scan = [value(p) for p in np.linspace(p0 - 10.0, p0 + 10.0, 41)]
+    # the polish evaluates through `jaxrod.design.linearize`: `optimize`'s evaluation, batched as it is
+    z = jnp.asarray(b.z)[None]
+    for got, want in zip(ds.linearize(problem, z), _linearize_batch(problem, z, 1)):
+        np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-12)
     slope = max(abs(a - c) for a, c in zip(scan, scan[1:])) / 0.5
     assert rec["v_s_after"] >= max(scan) - 0.02 * slope, (rec, max(scan))
     assert rec["v_s_after"] > rec["v_s_before"] + 1e-6  # the fold-target design is not a maximum
@@ -214,7 +220,7 @@ def test_optax_optimizer_decreases_the_objective():
 def test_studies_hand_their_optimizer_to_optimize(monkeypatch):
     """Studies (a), (b), (c) run `optimize` with the `optimizer` they are given (a stand-in
     `optimize` records it and stops the study)."""
-    from jaxrod.design import _studies
+    from jaxrod.paper import _studies
 
     class Stop(Exception):
         pass
@@ -227,11 +233,11 @@ def test_studies_hand_their_optimizer_to_optimize(monkeypatch):
 
     monkeypatch.setattr(_studies, "optimize", stub)
     opt = object()
-    for study in (ds.snap_angle_study, ds.snap_speed_study, ds.fastest_snap_study):
+    for study in (paper.snap_angle_study, paper.snap_speed_study, paper.fastest_snap_study):
         with pytest.raises(Stop):
             study(optimizer=opt, progress=False)
     with pytest.raises(Stop):
-        ds.snap_angle_study(progress=False)
+        paper.snap_angle_study(progress=False)
     assert seen == [opt, opt, opt, "lm"]
 
 
@@ -275,7 +281,7 @@ def test_critical_angle_gradients_match_central_difference():
 
 @pytest.mark.slow
 def test_study_a_reaches_targets_at_finer_mesh():
-    res = ds.snap_angle_study(60.0, -70.0, starts=2, n_coarse=40, n=160, n_check=320, progress=False)
+    res = paper.snap_angle_study(60.0, -70.0, starts=2, n_coarse=40, n=160, n_check=320, progress=False)
     assert bool(res.design.reached), res.design.message
     assert res.verification.reached, res.verification
     assert max(res.verification.errors_deg) <= 0.1

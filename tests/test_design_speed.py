@@ -19,6 +19,7 @@ import pytest
 
 import jaxrod.design as ds
 import jaxrod as jr
+import jaxrod.paper as paper
 from jaxrod.cli._main import main
 
 
@@ -109,7 +110,7 @@ def test_snap_speed_gradient_matches_central_differences():
 
 @pytest.fixture(scope="module")
 def study_c():
-    return ds.snap_speed_study(20.0, 90.0, n=N, n_check=N_CHECK, max_iter=10, progress=False)
+    return paper.snap_speed_study(20.0, 90.0, n=N, n_check=N_CHECK, max_iter=10, progress=False)
 
 
 @pytest.mark.slow  # 60 s of compiling the design loop; CI checks its Jacobian (the custom JVP) against FD
@@ -171,8 +172,8 @@ def test_snap_speed_bad_options():
 def test_unreachable_speed_target_says_not_reached():
     """500 v* is far above anything a strip snaps at (the paper's G/L = 0 intercept is 42.6 v*):
     the best design found comes back with 'target not reached'."""
-    r = ds.snap_speed_study(500.0, 90.0, n=N, n_check=N_CHECK, bounds={"gap": (0.3, 0.95)}, max_iter=4,
-                            progress=False)
+    r = paper.snap_speed_study(500.0, 90.0, n=N, n_check=N_CHECK, bounds={"gap": (0.3, 0.95)}, max_iter=4,
+                               progress=False)
     assert not r.reached and not bool(r.design.reached) and not r.verification.reached
     assert "target not reached" in r.message and "target not reached" in r.design.message
     assert math.isfinite(r.v_s) and 5.0 < r.v_s < 500.0
@@ -184,12 +185,12 @@ def test_unreachable_speed_target_says_not_reached():
 
 @pytest.mark.slow  # its own compile of the design loop (~50 s); study (c) and the gradient run in CI
 def test_study_b_respects_the_bound_and_beats_the_start():
-    r = ds.fastest_snap_study(0.3, n=N, n_check=N_CHECK, max_iter=5, progress=False)
+    r = paper.fastest_snap_study(0.3, n=N, n_check=N_CHECK, max_iter=5, progress=False)
     assert r.design.gap >= 0.3 and r.bound_respected
     assert 10.0 <= r.design.psi0_deg <= 180.0
     assert r.improved and r.v_s > r.v_s_start + 1.0, r.message
     # independently (adaptive Dopri8 at the finer mesh), the design is faster than the start too
-    start = ds.verify_snap_speed(90.0, 0.5, 0.02, N_CHECK, r.v_s_start)
+    start = paper.verify_snap_speed(90.0, 0.5, 0.02, N_CHECK, r.v_s_start)
     assert start.v_s < r.verification.v_s - 1.0
     d = r.to_dict()
     assert d["study"] == "b" and d["min_gap"] == 0.3 and "fastest snap found" in d["message"]
@@ -205,14 +206,14 @@ def test_snap_speed_gradient_design_mesh():
 
 @pytest.mark.slow
 def test_study_c_design_mesh():
-    r = ds.snap_speed_study(20.0, 90.0, progress=False)  # N = 48, check at N = 96
+    r = paper.snap_speed_study(20.0, 90.0, progress=False)  # N = 48, check at N = 96
     assert r.reached, r.message
     assert r.verification.n == 96 and r.verification.error <= 0.01
 
 
 @pytest.mark.slow
 def test_study_b_design_mesh():
-    r = ds.fastest_snap_study(0.3, max_iter=30, progress=False)  # N = 48, check at N = 96
+    r = paper.fastest_snap_study(0.3, max_iter=30, progress=False)  # N = 48, check at N = 96
     assert r.bound_respected and r.improved, r.message
     assert r.verification.reached, r.message
     pl = r.polish

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import jaxrod
 import jaxrod.design
+import jaxrod.paper
 import jaxrod.sweeps
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -37,7 +38,7 @@ def _resolve(path):
 def test_every_public_name_has_an_api_entry():
     entries = _entries()
     rendered = {id(_resolve(e)) for e in entries if not isinstance(_resolve(e), (int, float, str, tuple, dict))}
-    for module in (jaxrod, jaxrod.design, jaxrod.sweeps):
+    for module in (jaxrod, jaxrod.design, jaxrod.paper, jaxrod.sweeps):
         for name in sorted(_public(module)):
             path = f"{module.__name__}.{name}"
             value = getattr(module, name)

@@ -1,15 +1,18 @@
 """The layers of the house, checked on the source: data flows one way.
 
-    model -> energy -> linalg, sweeps -> statics -> branches -> dynamics -> design;  plot, cli on top
+    model -> energy -> linalg, sweeps -> statics -> branches -> dynamics -> design -> plot -> paper -> cli
 
 Every import inside `jaxrod/` and `design/` (installed as `jaxrod.design`) is read from the
 syntax tree, at module level and inside functions alike, and each must (1) go to the same or
 a lower layer, (2) name another subpackage only through its public surface (its `__init__`
 or a public module such as `jaxrod.energy.geometry`), never an underscore module or an
-underscore name of it, and (3) leave the design package out of the core.
+underscore name of it, and (3) leave the design package out of the core. The one way up is
+not an import statement: the names that moved from `jaxrod.design` to `jaxrod.paper` resolve
+through `jaxrod.design.__getattr__` on first use, with a DeprecationWarning (checked below).
 """
 
 import ast
+import json
 import pathlib
 import re
 import sys
@@ -19,7 +22,7 @@ import pytest
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 # the shared base (results, _misc, _compile, _custom_types and the package root's own files) is layer 0
 RANK = {"model": 1, "energy": 2, "linalg": 3, "sweeps": 3, "statics": 4, "branches": 5, "dynamics": 6, "design": 7,
-        "plot": 8, "cli": 9}
+        "plot": 8, "paper": 9, "cli": 10}
 CORE = {"model", "energy", "linalg", "sweeps", "statics", "branches", "dynamics"}
 
 
@@ -89,7 +92,7 @@ def _violations():
         rel = path.relative_to(ROOT)
         for mod, names in _imports(path, parts):
             there = _layer(mod)
-            if len(mod) == 1 and me is not None and me not in ("plot", "cli", "design"):
+            if len(mod) == 1 and me is not None and me not in ("plot", "cli", "design", "paper"):
                 out.append(f"{rel}: imports the package root `jaxrod` (a layer must import what it uses directly)")
             if there is None or there == me:
                 continue
@@ -123,7 +126,7 @@ def test_layout_check_catches_a_violation(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("name", ["model", "energy", "linalg", "statics", "branches", "dynamics", "plot", "cli",
-                                  "design"])
+                                  "design", "paper"])
 def test_every_layer_has_a_public_surface_with_a_docstring(name):
     import importlib
 
@@ -171,6 +174,82 @@ def test_dynamics_imported_on_first_use():
     lazy = {a.asname or a.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
             and node.module == "dynamics" for a in node.names}
     assert lazy == set(jr._DYNAMICS) and all(hasattr(d, n) for n in lazy)
+
+
+def test_paper_imported_on_first_use():
+    """`import jaxrod` and `import jaxrod.design` leave `jaxrod.paper` unimported (it sits
+    above both), and so does building the CLI's parser; `import jaxrod.paper` works on its own."""
+    import subprocess
+
+    code = ("import sys, warnings\n"
+            "warnings.simplefilter('error', DeprecationWarning)\n"
+            "import jaxrod, jaxrod.design\n"
+            "from jaxrod.design import *\n"
+            "assert 'jaxrod.paper' not in sys.modules, 'jaxrod.design imports jaxrod.paper'\n"
+            "import jaxrod.cli._main as m; m._build_parser()\n"
+            "assert 'jaxrod.paper' not in sys.modules, 'the CLI parser imports jaxrod.paper'\n"
+            "import jaxrod.paper\n"
+            "print('ok')\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
+
+
+def test_moved_names_resolve_with_a_deprecation_warning():
+    """Every name that moved from `jaxrod.design` to `jaxrod.paper` still resolves under its old
+    name, to `jaxrod.paper`'s own object, with a DeprecationWarning naming the new place; none
+    is exported by `from jaxrod.design import *` or listed by `dir`; an unknown name is an
+    AttributeError."""
+    import warnings
+
+    import jaxrod.design as ds
+    import jaxrod.paper as paper
+
+    moved = ds._MOVED_TO_PAPER
+    assert {"snap_angle_study", "snap_speed_study", "fastest_snap_study", "verify_snap_angles", "verify_snap_speed",
+            "StudyResult", "SpeedStudyResult", "SpeedVerification", "fig4_study", "FIG4_N", "FIG4_N_CHECK",
+            "FIG4_PEAKS", "FIG4_PROGRAMS", "FIG4_V_LAUNCH", "FIG4_V_SPARE", "actuator_study",
+            "crease_position_study", "two_crease_study"} <= moved
+    for name in sorted(moved):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            value = getattr(ds, name)
+        assert value is getattr(paper, name), name
+        assert [w.category for w in caught] == [DeprecationWarning], (name, caught)
+        assert f"jaxrod.paper.{name}" in str(caught[0].message) and caught[0].filename == __file__, name
+        assert name not in vars(ds) and name not in dir(ds), name
+    with pytest.warns(DeprecationWarning, match="jaxrod.paper.snap_angle_study"):
+        from jaxrod.design import snap_angle_study
+    assert snap_angle_study is paper.snap_angle_study
+    star = {}
+    exec("from jaxrod.design import *", star)
+    assert not moved & set(star) and "optimize" in star and "design_program" in star
+    with pytest.raises(AttributeError, match="no_such_name"):
+        ds.no_such_name
+
+
+def test_no_deprecated_name_in_use():
+    """Nothing in the repository reaches a moved name through `jaxrod.design` (the source, the
+    tests, the benchmarks, the docs, the notebooks); the deprecation path is for users' code."""
+    import jaxrod.design as ds
+
+    alias = r"(?:jaxrod\.design|\bds|\bjd|\bD|\bdesign)"
+    pattern = re.compile(alias + r"\.(" + "|".join(sorted(ds._MOVED_TO_PAPER, key=len, reverse=True)) + r")\b")
+    imported = re.compile(r"from jaxrod\.design import ([^\n]*)")
+    hits = []
+    files = [*(ROOT / "jaxrod").rglob("*.py"), *(ROOT / "design").rglob("*.py"), *(ROOT / "tests").glob("*.py"),
+             *(ROOT / "benchmarks").rglob("*.py"), *(ROOT / "docs").rglob("*.md"), ROOT / "README.md",
+             *(ROOT / "notebooks").glob("*.ipynb")]
+    for f in files:
+        if f.name == "test_layout.py" or "changelog" in f.name.lower():
+            continue
+        text = f.read_text()
+        if f.suffix == ".ipynb":  # the code cells' sources
+            text = "\n".join("".join(c["source"]) for c in json.loads(text)["cells"] if c["cell_type"] == "code")
+        hits += [f"{f.relative_to(ROOT)}: {m.group(0)}" for m in pattern.finditer(text)]
+        for m in imported.finditer(text):
+            names = set(re.findall(r"\w+", m.group(1)))
+            hits += [f"{f.relative_to(ROOT)}: from jaxrod.design import {n}" for n in names & ds._MOVED_TO_PAPER]
+    assert not hits, hits
 
 
 def test_result_code_table_lists_every_code():

@@ -113,7 +113,7 @@ def check(nb):
     assert not cache[f"loop/30/0.8/{N}"]["up"]["snaps"] and not cache[f"loop/30/0.8/{N}"]["down"]["snaps"]
 
     # --- dynamics (N = 24): the brink snap at Psi0 = 30 deg, G/L = 0.5. The integrator is
-    # the one `jaxrod.cli._reproduce` picks for the notebook's configuration (its cache keys end
+    # the one `jaxrod.paper.reproduce` picks for the notebook's configuration (its cache keys end
     # in it: "rattle", or Tsit5's rtol)
     tags = {k.rsplit("/", 1)[1] for k in cache if k.startswith(f"vs/30/0.5/{N_DYN}/")}
     assert len(tags) == 1, tags

@@ -8,7 +8,7 @@ import math
 import pytest
 
 import jaxrod as jr
-from jaxrod.cli import _reproduce as rp
+from jaxrod.paper import reproduce as rp
 
 CFG = dict(n=24, solver="rattle", psis=(30.0, 90.0, 180.0), gaps=(0.3, 0.5))  # the product's integrator
 

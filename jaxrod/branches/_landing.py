@@ -46,7 +46,7 @@ def _land(scene, parameter, t, m, lam, v, direction, up_expected, solver):
     mode, otherwise (no equilibrium found) from the critical state along the mode recomputed
     there, the push doubled from the second such retry on. `v` itself can be non-finite: at a
     fold, the corrector at the far end of a bisection bracket at round-off (2^-48 of a step, as
-    `design/_actuator.py` asks) solves with a Hessian singular to round-off and can return NaN,
+    `jaxrod/paper/_actuator.py` asks) solves with a Hessian singular to round-off and can return NaN,
     and the mode with it (the actuator study's one-sided snaps at N = 32 and 48). Each push
     goes the way the fold height is expected to move. The retries are a while loop that runs
     only where a member needs them (under `vmap`, masked for the others). Returns the state,

@@ -3,7 +3,7 @@
 `--program FILE.json` holds the knots, `{"times": [...], "alpha_left_deg": [...],
 "alpha_right_deg": [...]}` (`jaxrod.Program.to_json`), optionally with `"t1"` and `"state"`
 ("down" or "up", the start state at the first knot). `--program paper-fig4` runs the paper's
-Fig. 4 sequence: the three programs of `jaxrod.design.FIG4_PEAKS` one after the other
+Fig. 4 sequence: the three programs of `jaxrod.paper.FIG4_PEAKS` one after the other
 (`jaxrod.design.sequence_program`, the strip reset down between them) on the three balls,
 and reports per program (`programs`) the peak speed of each ball still on the table, which
 ball it launched (faster than `FIG4_V_LAUNCH`) and whether it spared the others (slower than
@@ -12,7 +12,7 @@ is `--n` 24 by default, with paper-fig4 the sequence's re-check mesh `FIG4_N_CHE
 `--objects FILE.json` holds the balls and the contact law, `{"balls": [{"name", "x", "y",
 "radius", "mass"}, ...], "stiffness", "thickness", "table": {"deceleration"} | "floor":
 {"height"}}` (only `balls` required);
-without it the three balls of `jaxrod.design.fig4_bodies` lie on a table above the strip. The JSON
+without it the three balls of `jaxrod.paper.fig4_bodies` lie on a table above the strip. The JSON
 output has the hits in time order (name, time, impulse, launch speed), the snaps (time,
 kind, from, to, fold), the energy balance's relative error and the result code; exit code 0
 for a successful run, 3 for a flagged one, 2 for bad input.
@@ -23,8 +23,8 @@ from __future__ import annotations
 import json
 import math
 
-from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, add_scene_args, creases_record, make_scene_from_args,
-                    writing)
+from .._records import creases_record
+from ._main import EXIT_NOT_CONVERGED, EXIT_OK, InputError, add_scene_args, make_scene_from_args, writing
 
 def register(sub):
     p = sub.add_parser("actuate", help="run a clamp program on the strip with balls it strikes: hits, snaps, energy")
@@ -33,7 +33,7 @@ def register(sub):
     n_opt.default, n_opt.help = None, "number of segments, even, >= 8 (default 24; 48 with --program paper-fig4)"
     p.add_argument("--program", metavar="FILE.json|paper-fig4", required=True,
                    help='knots {"times": [...], "alpha_left_deg": [...], "alpha_right_deg": [...]} (T, degrees), '
-                        "or paper-fig4: the paper's three programs in sequence (jaxrod.design.FIG4_PEAKS)"),
+                        "or paper-fig4: the paper's three programs in sequence (jaxrod.paper.FIG4_PEAKS)"),
     p.add_argument("--objects", metavar="FILE.json", default=None,
                    help='balls {"balls": [{"name", "x", "y", "radius", "mass"}], "stiffness", "thickness", '
                         '"table": {"deceleration"} or "floor": {"height"}} (default: three balls on a table)')
@@ -92,11 +92,12 @@ def _cmd_actuate(args):
     fig4 = args.program == "paper-fig4"
     if fig4:
         import jaxrod.design as ds
+        import jaxrod.paper as paper
 
         if args.n is None:
-            args.n = ds.FIG4_N_CHECK
+            args.n = paper.FIG4_N_CHECK
 
-        program = ds.sequence_program(ds.FIG4_PEAKS)
+        program = ds.sequence_program(paper.FIG4_PEAKS)
         raw = {"t1": float(program.times[-1]) + 2.0}
     else:
         raw = _read_json(args.program, "program")
@@ -106,7 +107,7 @@ def _cmd_actuate(args):
         if args.objects:
             bodies = bodies_from_json(_read_json(args.objects, "objects"))
         else:
-            from jaxrod.design import fig4_objects_json
+            from jaxrod.paper import fig4_objects_json
 
             bodies = bodies_from_json(fig4_objects_json())
     except (ValueError, TypeError) as e:
@@ -171,14 +172,16 @@ def _fig4_programs(act):
     balls it launched and whether it launched its own ball and spared the others; and whether
     all three did."""
     import jaxrod.design as ds
+    import jaxrod.paper as paper
 
-    targets = list(ds.FIG4_PROGRAMS)
+    targets = list(paper.FIG4_PROGRAMS)
     out, confirmed = [], True
     clear = ds.sequence_clearances(act, targets)
     for k, (sp, win) in enumerate(zip(ds.sequence_speeds(act, targets), ds.sequence_windows(len(targets)))):
-        launched, spared, good = ds.stage_outcome(sp, targets[k])
+        launched, spared, good = ds.stage_outcome(sp, targets[k], v_launch=paper.FIG4_V_LAUNCH,
+                                                  v_spare=paper.FIG4_V_SPARE)
         confirmed = confirmed and good
-        out.append(dict(program="ABC"[k], target=targets[k], peaks_deg=list(ds.FIG4_PEAKS[k]), window=list(win),
+        out.append(dict(program="ABC"[k], target=targets[k], peaks_deg=list(paper.FIG4_PEAKS[k]), window=list(win),
                         peak_speeds=sp, min_clearance=clear[k], launched=launched, spared_others=spared,
                         as_designed=good))
     return out, confirmed

@@ -1,6 +1,7 @@
 """Design subcommands: `jaxrod design` (inverse design of snap angles or of the snapping
 speed, `--target-speed`) and
-`jaxrod reproduce` (the paper's numbers beside jaxrod's, Markdown report + figures).
+`jaxrod reproduce` (the paper's numbers beside jaxrod's, Markdown report + figures:
+`jaxrod.paper.reproduce`).
 
 Each module in `jaxrod.cli._main._COMMAND_MODULES` defines `register(sub)`, which adds its
 subparsers to the `jaxrod` parser and attaches `handler=<function(args) -> exit code>`
@@ -8,8 +9,9 @@ with `set_defaults`. Shared pieces: `jaxrod.cli._main.add_scene_args`, `make_sce
 `InputError` (one-line error, exit 2), `EXIT_OK`, `EXIT_USAGE`, `EXIT_NOT_CONVERGED`.
 
 `design` exit codes: 0 target reached, 3 not reached (the JSON, with `reached: false` and
-the best design found, is still printed), 2 bad input. `--study two-creases` and `--study
-crease-position` run the crease design studies of `jaxrod.design`.
+the best design found, is still printed), 2 bad input. `--target-speed` runs study (c) and
+`--study two-creases` and `--study crease-position` the crease design studies, all of
+`jaxrod.paper`.
 """
 
 from __future__ import annotations
@@ -117,6 +119,7 @@ def _cmd_design_speed(args, optimizer):
     if not math.isfinite(args.s0) or args.s0 <= 0:
         raise InputError(f"s0: must be a finite number > 0, got {args.s0}")
     import jaxrod.design as ds
+    import jaxrod.paper as paper
 
     if not ds.dynamics_available():
         raise InputError("target-speed: the snapping-speed design needs jaxrod.snap_speed, which is not available")
@@ -125,9 +128,9 @@ def _cmd_design_speed(args, optimizer):
     gaps = [0.5] if starts == 1 else [lo + (hi - lo) * (k + 1) / (starts + 1) for k in range(starts)]
     gaps = [min(max(g, lo + 1e-3), hi - 1e-3) for g in gaps]
     try:
-        res = ds.snap_speed_study(v, psi0, s0=args.s0, free_s0=args.free_s0, bounds=bounds, gaps=gaps, n=n,
-                                  n_check=n_check, tol=tol, max_iter=args.max_iter, progress=not args.json,
-                                  optimizer=optimizer)
+        res = paper.snap_speed_study(v, psi0, s0=args.s0, free_s0=args.free_s0, bounds=bounds, gaps=gaps, n=n,
+                                     n_check=n_check, tol=tol, max_iter=args.max_iter, progress=not args.json,
+                                     optimizer=optimizer)
     except ValueError as e:
         raise InputError(str(e)) from None
     b, chk = res.design, res.verification
@@ -220,22 +223,23 @@ def _check_crease_study(args):
 
 def _cmd_design_creases(args):
     """`--study two-creases`: two creases with the target snap angles, then the fastest snap
-    up among them (`jaxrod.design.two_crease_study`); `--study crease-position`: the position of
+    up among them (`jaxrod.paper.two_crease_study`); `--study crease-position`: the position of
     one crease of angle --psi0 with the widest hysteresis (`crease_position_study`). Both are
     re-checked at --check-n."""
     n, n_check = _check_crease_study(args)
-    import jaxrod.design as ds
+    import jaxrod.paper as paper
 
     gap = 0.5 if args.gap is None else args.gap
     quiet = args.json
     try:
         if args.study == "two-creases":
-            res = ds.two_crease_study(args.target_alpha_up, args.target_alpha_down, gap=gap, n=n, n_check=n_check,
-                                      tol_deg=0.02 if args.tol is None else args.tol, progress=not quiet)
+            res = paper.two_crease_study(args.target_alpha_up, args.target_alpha_down, gap=gap, n=n,
+                                         n_check=n_check, tol_deg=0.02 if args.tol is None else args.tol,
+                                         progress=not quiet)
             ok = res.reached and res.check.result == "successful"
         else:
-            res = ds.crease_position_study(120.0 if args.psi0 is None else args.psi0, gap, n=n, n_check=n_check,
-                                           progress=not quiet)
+            res = paper.crease_position_study(120.0 if args.psi0 is None else args.psi0, gap, n=n,
+                                              n_check=n_check, progress=not quiet)
             ok = res.check.result == "successful"
     except ValueError as e:
         raise InputError(str(e)) from None
@@ -414,13 +418,13 @@ def _cmd_design(args):
 
 
 def _cmd_reproduce(args):
-    from . import _reproduce
+    from ..paper import reproduce
 
     try:
         os.makedirs(args.out, exist_ok=True)
     except OSError as e:
         raise InputError(f"out: cannot create directory {args.out!r}: {e.strerror or e}") from None
-    path = _reproduce.run(args.out, quick=args.quick, progress=True)
+    path = reproduce.run(args.out, quick=args.quick, progress=True)
     print(f"wrote {path}")
     return EXIT_OK
 

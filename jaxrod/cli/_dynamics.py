@@ -10,8 +10,9 @@ units of v* (and in m/s when the strip's material is given); `jaxrod speed-plane
 the grid Psi0 x G/L of brink snaps, writes each point to `DIR/speed_plane.csv` as it is
 done (the whole file rewritten atomically: temp file, then `os.replace`; each row carries
 the settings it was computed with), fits v_s/v* = v_m - a G/L - b Psi0 and draws
-`DIR/speed_plane.png`. A rerun reads back the points already there with the same
-settings and computes only the others; a torn or unreadable row is dropped and its
+`DIR/speed_plane.png` beside the paper's plane (`jaxrod.paper.fit_plane`, `plot_plane`). A
+rerun reads back the points already there with the same settings and computes only the
+others; a torn or unreadable row is dropped and its
 point recomputed. `jaxrod speed-plane --batch shard` runs the grid through
 `jaxrod.speed_plane` instead: every point split across every device of every process
 (`--coordinator` joins several), RATTLE only, stored in `DIR/speed_plane.nc` and resumable
@@ -26,12 +27,12 @@ import json
 import math
 import os
 
+from .._records import snap_record
 from ..results import RESULTS
 from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, InputError, _array_leaves, _contact_record, _result_name,
                     add_contact_args, add_distributed_args, add_scene_args, clearance_separation, contact_mode,
-                    creases_record, make_scene_from_args, needs_contact, writing)
+                    make_scene_from_args, needs_contact, writing)
 
-PAPER_FIT = (42.59, 30.38, 5.00)
 
 
 def _add_run_args(p):
@@ -142,48 +143,6 @@ def run_snap(scene, args, kind):
     return start, tr
 
 
-def _record(start, tr, phys=None):
-    import numpy as np
-
-    import jaxrod as jr
-
-    def f(x):
-        x = float(x)
-        return x if math.isfinite(x) else None
-
-    t = np.asarray(tr.t)
-    fs = np.asarray(tr.fold_speed)
-    ok = np.isfinite(fs)
-    # snap duration: time the fold speed stays above half its peak
-    above = t[ok][fs[ok] >= 0.5 * float(tr.v_s)]
-    duration = float(above[-1] - above[0]) if above.size else float("nan")
-    solved = bool(start.ok) and bool(tr.result == jr.RESULTS.successful)
-    rec = dict(
-        alpha_c_deg=f(np.degrees(float(start.alpha_c))),
-        snapped=bool(tr.snapped),
-        v_s=f(tr.v_s),
-        t_peak=f(tr.t_peak),
-        t_snap=f(tr.t_cross),
-        snap_duration=f(duration),
-        t_end=f(tr.t_end),
-        bending_energy_before=f(start.bending_before),
-        kinetic_energy_peak=f(tr.kinetic_peak),
-        energy_drift=f(tr.energy_drift),
-        num_steps=int(tr.num_steps),
-        converged=solved,
-        result=_result_name(tr.result),
-        units="L = B = lambda = 1: speeds in v*, times in T = L/v*, energies in B/L",
-        creases=creases_record(start.scene),
-    )
-    # each crease's peak speed (the centred crease first), beside the fold's v_s at L/2
-    rec["v_s_creases"] = [f(v) for v in np.asarray(tr.v_s_creases)] if rec["creases"] else []
-    if phys is not None:
-        vstar, T = phys
-        rec.update(v_s_m_per_s=f(float(tr.v_s) * vstar), t_snap_s=f(float(tr.t_cross) * T),
-                   snap_duration_s=f(duration * T), v_star_m_per_s=vstar, time_unit_s=T)
-    return rec
-
-
 def _clearance(scene, tr, theta0=None):
     """The smallest clearance over the run's frames and the start state `theta0` (segments
     at least N/10 apart, as `jaxrod snap-angles` reports it), in L; NaN without a finite
@@ -218,7 +177,7 @@ def _cmd_snap(args):
 
     def run(scene):
         start, tr = run_snap(_array_leaves(scene), args, args.scene)
-        rec = _record(start, tr, phys)
+        rec = snap_record(start, tr, phys)
         c = _clearance(start.scene, tr, start.theta0)  # the start state and every frame, one program
         rec["clearance"] = c if math.isfinite(c) else None
         rec.update(_contact_record(start.scene))
@@ -258,23 +217,6 @@ SETTINGS = ["n", "s0", "direction", "nudge", "solver", "rtol", "t1", "creases_at
 RESULT_FIELDS = ["snaps", "alpha_c_deg", "v_s", "t_snap", "kinetic_energy_peak", "bending_energy_before",
                  "num_steps", "result", "v_s_creases"]
 FIELDS = ["psi0_deg", "gap", *SETTINGS, *RESULT_FIELDS]
-
-
-def fit_plane(rows):
-    """Least-squares v_s = v_m - a G - b Psi0 (Psi0 in rad) over the snapping rows; returns
-    (v_m, a, b), their standard errors, and the rms residual."""
-    import numpy as np
-
-    r = [x for x in rows if x["snaps"] and x["v_s"] is not None and math.isfinite(x["v_s"])]
-    G = np.array([x["gap"] for x in r])
-    P = np.radians([x["psi0_deg"] for x in r])
-    v = np.array([x["v_s"] for x in r])
-    A = np.stack([np.ones_like(G), -G, -P], 1)
-    coef, *_ = np.linalg.lstsq(A, v, rcond=None)
-    res = v - A @ coef
-    dof = max(len(v) - 3, 1)
-    cov = np.linalg.inv(A.T @ A) * (res @ res) / dof
-    return coef.tolist(), np.sqrt(np.diag(cov)).tolist(), float(np.sqrt(np.mean(res**2)))
 
 
 def _settings(args, layout=()):
@@ -449,10 +391,12 @@ def _report_plane(args, rows, out, where):
         print(f"jaxrod speed-plane: points not successful (codes in {where}): "
               + ", ".join(f"{k} x{v}" for k, v in sorted(flagged.items())), file=sys.stderr)
     if out["snapping"] >= 4:
+        from ..paper import SPEED_PLANE, fit_plane, plot_plane
+
         coef, err, rms = fit_plane(rows)
         out.update(fit=dict(v_m=coef[0], a=coef[1], b=coef[2], stderr=err, rms=rms),
-                   paper=dict(v_m=PAPER_FIT[0], a=PAPER_FIT[1], b=PAPER_FIT[2]))
-        _plot_plane(rows, coef, os.path.join(args.out, "speed_plane.png"))
+                   paper=dict(v_m=SPEED_PLANE[0], a=SPEED_PLANE[1], b=SPEED_PLANE[2]))
+        plot_plane(rows, coef, os.path.join(args.out, "speed_plane.png"))
         out["figure"] = os.path.join(args.out, "speed_plane.png")
     _write_atomic(os.path.join(args.out, "speed_plane_fit.json"), lambda fh: json.dump(out, fh, indent=1))
     print(json.dumps(out))
@@ -489,28 +433,3 @@ def _speed_plane_sharded(args, psis, gaps, layout=()):
                devices=int(ds.attrs["device_count"]), processes=int(ds.attrs["process_count"]),
                creases_at=list(layout) or None)
     return _report_plane(args, rows, out, "the NetCDF file")
-
-
-def _plot_plane(rows, coef, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    fig, ax = plt.subplots(figsize=(6, 4))
-    psis = sorted({r["psi0_deg"] for r in rows})
-    g = np.linspace(0.25, 0.75, 20)
-    for i, p in enumerate(psis):
-        r = sorted([x for x in rows if x["psi0_deg"] == p and x["snaps"]], key=lambda x: x["gap"])
-        c = f"C{i}"
-        ax.plot([x["gap"] for x in r], [x["v_s"] for x in r], "o", color=c, label=f"Psi0 = {p:g} deg")
-        ax.plot(g, coef[0] - coef[1] * g - coef[2] * np.radians(p), "-", color=c, lw=0.8)
-        ax.plot(g, PAPER_FIT[0] - PAPER_FIT[1] * g - PAPER_FIT[2] * np.radians(p), ":", color=c, lw=0.8)
-    ax.set_xlabel("G / L")
-    ax.set_ylabel("v_s / v*")
-    ax.set_title("brink snaps: points; fit (solid); paper's plane (dotted)")
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)

@@ -20,24 +20,12 @@ from the process's in-memory cache, the numbers are the same.
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import os
-import pathlib
+
+from .._misc import source_digest
 
 EXPORT_SUFFIX = ".jaxexport"
-
-
-@functools.lru_cache(maxsize=1)
-def _source_digest() -> str:
-    import jaxrod
-
-    root = pathlib.Path(jaxrod.__file__).parent
-    h = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
-        h.update(str(path.relative_to(root)).encode())
-        h.update(path.read_bytes())
-    return h.hexdigest()
 
 
 def export_dir() -> str | None:
@@ -58,7 +46,7 @@ def cache_key(name: str, static, leaves) -> str:
     import jaxlib
 
     h = hashlib.sha256()
-    for part in (name, jax.__version__, jaxlib.__version__, _source_digest(), str(jax.config.jax_enable_x64),
+    for part in (name, jax.__version__, jaxlib.__version__, source_digest(), str(jax.config.jax_enable_x64),
                  repr(static), str(jax.tree.structure(static))):
         h.update(part.encode())
         h.update(b"\0")

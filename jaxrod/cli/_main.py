@@ -19,6 +19,8 @@ import os
 import sys
 import warnings
 
+from .._records import creases_record
+
 EXIT_OK = 0
 EXIT_USAGE = 2
 EXIT_NOT_CONVERGED = 3
@@ -96,18 +98,6 @@ def resolve_scene_args(args):
     if hasattr(args, "crease") and getattr(args, "psi0", 0.0) is None:
         args.psi0 = 180.0 if args.crease else DEFAULTS["psi0"]
     return args
-
-
-def creases_record(scene):
-    """The scene's creases for the JSON output: `[{"position", "psi0_deg", "s0"}, ...]` in
-    `Strip.crease_list` order, the centred crease first (the flat strip lists none)."""
-    import numpy as np
-
-    st = scene.strip
-    pos, ang, wid = (np.asarray(v, float) for v in st.crease_list())
-    L = float(st.length)
-    return [{"position": float(c) / L, "psi0_deg": math.degrees(float(a)), "s0": float(w) / L}
-            for c, a, w in zip(pos, ang, wid)] if (st.creases is not None or float(st.psi0) < math.pi) else []
 
 
 def add_scene_args(p):

@@ -26,8 +26,8 @@ def _fin(x, deg=False):
 
 
 def _cmd_hysteresis(args):
-    from ._main import (EXIT_NOT_CONVERGED, EXIT_OK, _array_leaves, _result_name, creases_record,
-                        make_scene_from_args, writing)
+    from .._records import creases_record
+    from ._main import EXIT_NOT_CONVERGED, EXIT_OK, _array_leaves, _result_name, make_scene_from_args, writing
 
     scene = make_scene_from_args(args)
     import numpy as np

@@ -80,7 +80,7 @@ ACTUATOR_VISCOSITY = 1e-3
 r"""Default hinge viscosity $\eta$ of `actuate` ($B\,T$; a damping ratio of a few percent on the
 fundamental): it damps the grid-scale bending modes that ring after a snap. Without it a
 ball's launch speed depends on the phase of that ringing at the hit. Measured at
-$\Psi_0=60^\circ$, $G/L=0.5$, N = 16, the right ball of `jaxrod.design.fig4_bodies` under the
+$\Psi_0=60^\circ$, $G/L=0.5$, N = 16, the right ball of `jaxrod.paper.fig4_bodies` under the
 program (60, -30) deg: without viscosity its speed goes up and down (15.48, 15.52, 15.56,
 15.56, 15.54, ...) as the left peak moves by 0.25 deg, so a gradient misleads a design; with
 it the speed rises evenly by 0.0195 v* per 0.25 deg, and is 6 % lower (14.57 against 15.54)."""

@@ -1,4 +1,5 @@
-r"""`jaxrod reproduce`: the paper's results beside jaxrod's, as a Markdown report + figures.
+r"""`jaxrod reproduce`: the paper's results beside jaxrod's, as a Markdown report + figures
+(`run`; the command line's `jaxrod reproduce --out DIR` calls it).
 
 The report is a list of *sections*; each computes its numbers (cached in `DIR/cache.json`
 point by point, so an interrupted run resumes), returns Markdown and table rows
@@ -36,10 +37,10 @@ class _Cache:
     SOURCE_KEY = "__jaxrod_source__"
 
     def __init__(self, path):
-        from ._exported import _source_digest
+        from .._misc import source_digest
 
         self.path = path
-        self.digest = _source_digest()
+        self.digest = source_digest()
         self.data = {}
         if os.path.exists(path):
             try:
@@ -262,7 +263,6 @@ def section_master_curves(cache, n, out, progress, quick=False):
 # arguments (tolerances, t1 and frame windows passed as arrays, stop at the first overshoot), so
 # one compile of `jr.simulate` per mesh serves all of them.
 
-_PAPER_FIT = (42.59, 30.38, 5.00)  # v_s/v* = v_m - a G/L - b Psi0 (Psi0 in rad), the paper's Eq. 3
 _T1 = 4.0  # time limit in T; every brink snap here ends (first overshoot) before 1.6 T
 _N_FRAMES = 64
 # PET (docs/model.md): L = 20 cm, t = 80-250 um, E ~ 4-5 GPa, rho ~ 1380 kg/m^3. v* = (t/L) sqrt(E/(12 rho))
@@ -339,9 +339,9 @@ def _cached_traj(out, key, fn):
 
 
 def _dyn_record(start, tr):
-    from ._dynamics import _record
+    from .._records import snap_record
 
-    return _record(start, tr)
+    return snap_record(start, tr)
 
 
 def _vs_record(psi0_deg, gap, cfg):
@@ -457,7 +457,7 @@ def section_snap_dynamics(cache, out, progress, cfg):
 
 def section_speed_plane(cache, out, progress, cfg):
     """Figs. 3d-e: v_s over Psi0 x G/L and the plane fit beside the paper's."""
-    from ._dynamics import _plot_plane, fit_plane
+    from ._speed_plane import SPEED_PLANE, fit_plane, plot_plane
 
     title = "Snap speed plane (Figs. 3d-e)"
     pts = [(p, g) for p in cfg["psis"] for g in cfg["gaps"]]
@@ -469,7 +469,7 @@ def section_speed_plane(cache, out, progress, cfg):
     for p in cfg["psis"]:
         table.append(f"| {p:g} deg | " + " | ".join(
             f"{recs[(p, g)]['v_s']:.2f}" if recs[(p, g)].get("snaps") else "no snap" for g in cfg["gaps"]) + " |")
-    paper = [f"{_PAPER_FIT[0]} +- 1.33", f"{_PAPER_FIT[1]} +- 2.57", f"{_PAPER_FIT[2]} +- 0.26"]
+    paper = [f"{SPEED_PLANE[0]} +- 1.33", f"{SPEED_PLANE[1]} +- 2.57", f"{SPEED_PLANE[2]} +- 0.26"]
     names = ["v_m (G/L = 0, Psi0 = 0 intercept)", "a (slope in G/L)", "b (slope in Psi0, rad)"]
     data = {"points": {f"{p:g}/{g:g}": r for (p, g), r in recs.items()}, "n": cfg["n"], "solver": _dyn_words(cfg)}
     if nsnap < 4:
@@ -477,7 +477,7 @@ def section_speed_plane(cache, out, progress, cfg):
                 for nm, pv in zip(names, paper)]
         return title, "\n".join(table), rows, data
     coef, err, rms = fit_plane(rows_fit)
-    _plot_plane(rows_fit, coef, os.path.join(out, "speed_plane.png"))
+    plot_plane(rows_fit, coef, os.path.join(out, "speed_plane.png"))
     rows = [(f"v_s/v* = v_m - a G/L - b Psi0: {nm}", pv, f"{c:.2f} +- {e:.2f}",
              f"least squares over {nsnap} snapping points, rms residual {rms:.2f} v*" if k == 0 else "")
             for k, (nm, pv, c, e) in enumerate(zip(names, paper, coef, err))]

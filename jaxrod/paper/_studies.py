@@ -1,4 +1,5 @@
-r"""Design studies, each a function returning a result with an independent check.
+r"""The design studies (a)-(c), each a function returning a result with an independent check,
+built on `jaxrod.design`'s objectives, parametrizations and `optimize`.
 
 (a) `snap_angle_study`: $(\Psi_0, G/L)$ such that $\alpha_{c,\rm up}$ and $\alpha_{c,\rm down}$ hit
     targets (default 60 and -70 deg), $s_0 = 0.02$. Multi-start Levenberg-Marquardt on a coarse
@@ -15,8 +16,8 @@ r"""Design studies, each a function returning a result with an independent check
     loops can deadlock XLA:CPU), then re-check the design by an independent forward solve
     (`verify_snap_speed`: `jaxrod.snap_dynamics`, the brink scene of `jaxrod.brink` with its
     own nudge, adaptive Dopri8 at tight tolerance, on the finer mesh `n_check`).
-(d) `actuator_study` (left half, right half, both: the paper's Fig. 4) is not wired here
-    (see `design/_actuator.py`).
+(d) `actuator_study` (left half, right half, both: the paper's Fig. 4) is in
+    `jaxrod/paper/_actuator.py`.
 """
 
 from __future__ import annotations
@@ -30,11 +31,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxrod as jr
-
-from ._critical import design_scene
-from ._objectives import AlphaDown, AlphaUp, SnapSpeed, dynamics_available
-from ._optimize import DesignResult, MultiStartResult, Problem, _linearize, auto_batch_size, optimize
-from ._params import NAMES, Parametrization
+from jaxrod.design import (AlphaDown, AlphaUp, DesignResult, MultiStartResult, Parametrization, Problem, SnapSpeed,
+                           design_scene, dynamics_available, linearize, optimize)
 
 
 @dataclasses.dataclass
@@ -303,20 +301,18 @@ def golden_max(f, lo, hi, *, xtol=0.02, x0=None, f0=None):
 def _polish_psi0(d, terms, param, n, window, xtol):
     """Golden-section polish of study (b)'s fold angle at the design's gap (`golden_max` on
     [Psi0 - window, Psi0 + window] within the bounds), on the very program the optimizer
-    compiled (`_linearize` of the same problem: no new compilation). Returns the
+    compiled (`jaxrod.design.linearize` of the same problem: no new compilation). Returns the
     design with the better of the two points and a record of the polish."""
     problem = Problem(terms, param, n)
-    batch = auto_batch_size()  # as `optimize` ran it: the same compiled program
-    free = [k for k in NAMES if k in param.free]
-    i = free.index("psi0_deg")
+    i = param.free.index("psi0_deg")
     z_best = np.asarray(d.z, float)
-    lo_b, hi_b = param.lower[NAMES.index("psi0_deg")], param.upper[NAMES.index("psi0_deg")]
+    lo_b, hi_b = param.describe()["psi0_deg"]["bounds"]
     cache = {}
 
     def v_at(p):
         z = z_best.copy()
         z[i] = float(param.from_values(psi0_deg=p)[i])
-        r, _, vals, codes = _linearize(problem, jnp.asarray(z)[None], batch)
+        r, _, vals, codes = linearize(problem, jnp.asarray(z)[None])  # batched as `optimize` ran it
         cache[p] = (z, np.asarray(r)[0], np.asarray(vals)[0], np.asarray(codes)[0])
         return float(cache[p][2][0])
 
