@@ -112,6 +112,65 @@ def test_layers_flow_one_way():
     assert _violations() == []
 
 
+def _file_of(mod):
+    """The file of the jaxrod module `mod` (a list of names), or None where it is not a module."""
+    base = ROOT / "design" / pathlib.Path(*mod[2:]) if mod[:2] == ["jaxrod", "design"] else ROOT / pathlib.Path(*mod)
+    if base.with_suffix(".py").exists():
+        return base.with_suffix(".py")
+    return base / "__init__.py" if (base / "__init__.py").exists() else None
+
+
+def _import_cycles():
+    """The sets of jaxrod's modules that import each other, directly or through others, with
+    every import counted (those inside functions too); `from pkg import submodule` imports the
+    submodule."""
+    graph = {}
+    for path, parts in _modules():
+        edges = set()
+        for mod, names in _imports(path, parts):
+            target = _file_of(mod)
+            if target is None:
+                continue
+            subs = [_file_of(mod + [n]) for n in names]
+            edges.update(f for f in subs if f is not None)
+            if not names or not all(subs):
+                edges.add(target)
+        edges.discard(path)
+        graph[path] = edges
+    index, low, stack, on, cycles = {}, {}, [], set(), []
+
+    def visit(v):  # Tarjan's strongly connected components
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(str(p.relative_to(ROOT)) for p in comp))
+
+    for v in list(graph):
+        if v not in index:
+            visit(v)
+    return cycles
+
+
+def test_no_import_cycles():
+    """No two modules of jaxrod import each other, not even inside a function."""
+    assert _import_cycles() == []
+
+
 def test_layout_check_catches_a_violation(tmp_path, monkeypatch):
     """The check itself can fail: a statics module importing a branches private is caught."""
     fake = tmp_path / "jaxrod" / "statics"

@@ -193,7 +193,8 @@ def _build_parser():
                                    "nearly perfect strip takes, jaxrod.snap_routes); the clearance of the\n"
                                    "reported states (smallest distance between segments at least N/10 apart\n"
                                    "along the strip, in L).\n"
-                                   "--alpha is ignored (the loop starts at 0).",
+                                   "The loop starts at alpha = 0: --alpha alone is ignored; with\n"
+                                   "--alpha-right, the clamps' difference is kept as a misalignment.",
                        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_scene_args(q)
     add_contact_args(q)

@@ -100,6 +100,7 @@ from jax import lax
 from .._misc import run_if
 from .._compile import traced_once
 from .geometry import discretize
+from .kinematics import positions
 
 TOL = 1e-9
 """Default tolerance of `self_intersects`, relative to the strip length."""
@@ -466,8 +467,6 @@ def contact_hessian(theta, scene, d=None):
 
 
 def _nodes(theta, scene, force):
-    from .lagrangian import positions  # the Lagrangian imports this module
-
     d = discretize(scene)
     if force is None:
         return inextensible_nodes(theta, d)
