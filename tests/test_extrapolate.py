@@ -181,3 +181,23 @@ def test_post_snap_stage_changes_no_angle(psi0, gap):
             assert np.array_equal(np.isnan(u), np.isnan(v)), (p, f)
         assert x.result == y.result and x.start_result == y.start_result
     assert int(a.fine.up.branch.count[1]) == 0 or int(a.fine.up.stage) == 1
+
+
+def test_near_must_be_an_extrapolated_result():
+    """`near` of the extrapolation is a neighbour's `snap_angles_extrapolated` (both meshes):
+    anything else is refused by name before a solve."""
+    with pytest.raises(ValueError, match="near"):
+        jr.snap_angles_extrapolated(jr.make_scene(60.0, 0.5, n=16), near="previous")
+
+
+@pytest.mark.slow  # the warm programs of both meshes compiled (CI: the scatter's warm members, test_scatter.py)
+def test_extrapolated_from_a_neighbour_equals_cold():
+    """Both meshes started from a neighbour's critical points give the cold call's angles and
+    codes, with every path warm."""
+    near = jr.snap_angles_extrapolated(jr.make_scene(60.0, 0.5, n=20))
+    scene = jr.make_scene(63.0, 0.51, n=20)
+    cold, warm = jr.snap_angles_extrapolated(scene), jr.snap_angles_extrapolated(scene, near=near)
+    for a, b in ((cold.up, warm.up), (cold.down, warm.down)):
+        assert a.result == b.result == jr.RESULTS.successful and int(a.kind) == int(b.kind)
+        assert abs(float(a.alpha_c) - float(b.alpha_c)) < 1e-9
+    assert all(bool(p.warm) for m in (warm.coarse, warm.fine) for p in (m.up, m.down))

@@ -129,20 +129,31 @@ def extrapolate_path(c: SnapPath, f: SnapPath) -> ExtrapolatedPath:
     )
 
 
-def snap_angles_extrapolated(scene: Scene, *, continue_after_snap: bool = False, **kwargs) -> ExtrapolatedSnapAngles:
+def snap_angles_extrapolated(scene: Scene, *, continue_after_snap: bool = False, near=None,
+                             **kwargs) -> ExtrapolatedSnapAngles:
     r"""[`jaxrod.snap_angles`][] on the scene's mesh ($N$) and on one twice as fine, and
     their Richardson extrapolation (module docstring). `kwargs` go to `snap_angles`.
     Costs one `snap_angles` at $N$ plus one at $2N$ (two compilations on first use), run one
     after the other (under `jax.vmap` each member's two meshes).
 
+    `near`: the `snap_angles_extrapolated` of a neighbouring scene with the same mesh, whose
+    coarse and fine paths start this scene's (`snap_angles(..., near=)` on each mesh: the
+    same angles, from a neighbour's critical point where its checks accept it), or None.
+
     `continue_after_snap` defaults to False here: the landed branch after each snap (the
     post-snap stage of the hysteresis figures) does not change the critical angles or the
     landed states, and skipping it saves about a quarter of the run; pass True to keep it
     in `coarse` and `fine`."""
+    near_coarse = near_fine = None
+    if near is not None:
+        if not isinstance(near, ExtrapolatedSnapAngles):
+            raise ValueError("near must be the jaxrod.snap_angles_extrapolated result of a neighbouring scene "
+                             f"(its coarse and fine meshes) or None, got {type(near).__name__}")
+        near_coarse, near_fine = near.coarse, near.fine
     fine_scene = refined_scene(scene)
     kwargs = dict(kwargs, continue_after_snap=continue_after_snap)
 
-    fine, coarse = snap_angles(fine_scene, **kwargs), snap_angles(scene, **kwargs)
+    fine, coarse = snap_angles(fine_scene, near=near_fine, **kwargs), snap_angles(scene, near=near_coarse, **kwargs)
     up, down = _extrapolate_paths(*(_read(getattr(m, d)) for m in (coarse, fine) for d in ("up", "down")))
     return ExtrapolatedSnapAngles(up=up, down=down, coarse=coarse, fine=fine, n_coarse=scene.mesh.n,
                                   n_fine=fine_scene.mesh.n)
