@@ -82,7 +82,7 @@ class SnapRoutes(eqx.Module):
 
 
 def _second(scene_d, path, direction, settings, bound, bisections, tol):
-    parameter = SymmetricAlpha()
+    parameter = SymmetricAlpha.for_scene(scene_d)
     scene = lax.stop_gradient(scene_d)
     dtype = path.theta_before.dtype
     nan = jnp.full((), jnp.nan, dtype)
@@ -157,7 +157,8 @@ def snap_routes(scene, *, snap: SnapAngles | None = None, settings: Continuation
         raise ValueError(f"settings must be a jaxrod.Continuation, got {settings!r}")
     check_number("bound", bound, lo=0.0, hi=jnp.pi, hi_open=False)
     check_int("bisections", bisections, lo=1)
-    scene_d = SymmetricAlpha().set(float_scene(scene), 0.0)
+    scene_d = float_scene(scene)
+    scene_d = SymmetricAlpha.for_scene(scene_d).set(scene_d, 0.0)  # keeps a misalignment, as snap_angles does
     require_float64(jnp.result_type(scene_d.strip.psi0), "snap_routes")
     if snap is None:
         snap = snap_angles(scene, settings=settings, bound=bound, bisections=bisections)
