@@ -16,8 +16,8 @@ import jaxrod.design as jd
 N = 26
 
 
-@pytest.mark.parametrize("kind", ["crease_offset", pytest.param("kink", marks=pytest.mark.slow),
-                                  pytest.param("clamp_misalignment", marks=pytest.mark.slow)])
+@pytest.mark.slow  # a crease set's snap angles compiled (CI: the scenes' construction below, no solve)
+@pytest.mark.parametrize("kind", ["crease_offset", "kink", "clamp_misalignment"])
 def test_zero_amplitude_is_the_nominal_strip(kind):
     nominal = jr.snap_angles(jr.make_scene(60.0, 0.5, n=N))
     imperfect = jr.snap_angles(jd.imperfect_scene(60.0, 0.5, kind, 0.0, n=N))
@@ -59,6 +59,26 @@ def test_kink_laws():
     assert s.kind == "kink" and s.up.predicted == pytest.approx(2 / 3) and s.down.predicted == 1.0
 
 
+def test_imperfect_scenes_carry_their_amplitude():
+    """Each imperfection changes the nominal strip where its definition says, by its amplitude
+    (no solve): the crease's position, the weak crease's fold angle, the clamps' difference."""
+    from jaxrod.design._imperfections import IMPERFECTIONS
+
+    nominal = {k: jd.imperfect_scene(60.0, 0.5, k, 0.0, n=N) for k in IMPERFECTIONS}
+    off = jd.imperfect_scene(60.0, 0.5, "crease_offset", 0.01, n=N)
+    assert float(off.strip.creases.positions[0]) == pytest.approx(0.51)
+    kink = jd.imperfect_scene(60.0, 0.5, "kink", 2.0, n=N)
+    np.testing.assert_allclose(np.degrees(np.asarray(kink.strip.creases.angles)), [60.0, 178.0])
+    assert float(kink.strip.creases.positions[1]) == pytest.approx(0.25)
+    mis = jd.imperfect_scene(60.0, 0.5, "clamp_misalignment", 2.0, n=N)
+    assert math.degrees(float(mis.clamps.alpha_left)) == pytest.approx(1.0)
+    assert math.degrees(float(mis.clamps.alpha_right)) == pytest.approx(-1.0)
+    for k, sc in nominal.items():
+        assert float(sc.clamps.alpha_left) == float(sc.clamps.alpha_right) == 0.0, k
+        assert float(sc.strip.creases.positions[0]) == 0.5 and math.degrees(float(sc.strip.creases.angles[0])) == \
+            pytest.approx(60.0)
+
+
 def test_symmetric_alpha_keeps_a_misalignment():
     """`SymmetricAlpha(delta)` turns both clamps about the misalignment: alpha_L - alpha_R =
     delta, their mean alpha; `for_scene` reads delta from the scene (no solve)."""
@@ -79,10 +99,11 @@ def test_clamp_misalignment_is_mirror_even():
     """A misalignment +eps is the mirror image of -eps: the same snap angles to round-off; the
     branch point of the nominal snap up unfolds into a fold that comes earlier; only the clamps'
     difference matters (a scene built with clamp angles 3 and 2 deg is the 1 deg misalignment)."""
-    plus = jr.snap_angles(jd.imperfect_scene(60.0, 0.5, "clamp_misalignment", 1.0, n=N))
-    minus = jr.snap_angles(jd.imperfect_scene(60.0, 0.5, "clamp_misalignment", -1.0, n=N))
-    built = jr.snap_angles(jr.make_scene(60.0, 0.5, 3.0, alpha_right_deg=2.0, n=N))
-    nominal = jr.snap_angles(jr.make_scene(60.0, 0.5, n=N))
+    n = 24  # the plain scene's program of test_scatter.py's single calls
+    plus = jr.snap_angles(jr.make_scene(60.0, 0.5, 0.5, alpha_right_deg=-0.5, n=n))
+    minus = jr.snap_angles(jr.make_scene(60.0, 0.5, -0.5, alpha_right_deg=0.5, n=n))
+    built = jr.snap_angles(jr.make_scene(60.0, 0.5, 3.0, alpha_right_deg=2.0, n=n))
+    nominal = jr.snap_angles(jr.make_scene(60.0, 0.5, n=n))
     for a, b, c in ((plus.up, minus.up, built.up), (plus.down, minus.down, built.down)):
         assert a.result == b.result == c.result == jr.RESULTS.successful
         np.testing.assert_allclose(float(a.alpha_c), float(b.alpha_c), rtol=0, atol=1e-10)
@@ -103,7 +124,7 @@ def test_clamp_misalignment_laws():
 
 def test_brink_keeps_the_misalignment():
     """The brink's clamps (scene and protocol) turn about the scene's misalignment."""
-    sc = jd.imperfect_scene(60.0, 0.5, "clamp_misalignment", 1.0, n=N)
+    sc = jr.make_scene(60.0, 0.5, 0.5, alpha_right_deg=-0.5, n=24)
     start = jr.brink(sc, "up")
     assert math.degrees(float(start.scene.clamps.alpha_left - start.scene.clamps.alpha_right)) == pytest.approx(1.0)
     assert math.degrees(float(start.protocol.alpha_left0 - start.protocol.alpha_right0)) == pytest.approx(1.0)

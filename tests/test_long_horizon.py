@@ -104,7 +104,7 @@ def test_asymmetric_scene_to_t1_4():
     """The paper's Fig. 4 actuation (right clamp turned at 0.5 rad/T, left held) to t1 = 4:
     before, v_s 4.6e14 with 'converged'; now a successful run with v_s of the brink snap's
     order (the snap speed of the symmetric scene is ~26 v*) and a bounded energy balance."""
-    sc = jr.make_scene(psi0_deg=60, gap=0.5, n=50)
+    sc = jr.make_scene(psi0_deg=60, gap=0.5, n=24)
     start, tr = jr.snap_dynamics(sc, "up", kind="asymmetric", t1=4.0, n_frames=8)
     assert tr.result == jr.RESULTS.successful, jr.RESULTS[tr.result]
     assert bool(tr.snapped)

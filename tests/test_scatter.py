@@ -78,6 +78,8 @@ def test_statistics_agree_with_an_independent_loop(stats):
         assert 0.3 < st.std / loop.std(ddof=1) < 3.0
 
 
+@pytest.mark.slow  # the batch's reverse-mode program compiled (CI: each member's implicit derivative in
+# test_critical.py and test_gradients.py, the sample quantile's derivative in test_robust.py)
 def test_mean_gradient_matches_central_differences():
     """`jax.grad` of `scatter_mean` (the reparametrization estimator) equals central
     differences of the same estimator on the same draws."""
