@@ -53,3 +53,26 @@ def test_output_readers():
     assert "noise" in notebook_text(nb) and "TAG {\"x\": 0}" not in notebook_text(nb)
     with pytest.raises(AssertionError, match="OTHER"):
         notebook_record(nb, "OTHER")
+
+
+def test_no_notebook_rebinds_a_module_it_imports():
+    """A module imported under a name (`import jaxrod.paper as paper`) is not bound again by a
+    later cell (`paper = lambda ...`), which would break every use after it (no kernel run)."""
+    import ast
+
+    for path in sorted(NB.glob("*.ipynb")):
+        nb = nbformat.read(path, as_version=4)
+        source = "\n".join(c.source for c in nb.cells if c.cell_type == "code")
+        source = "\n".join(line for line in source.splitlines() if not line.lstrip().startswith(("%", "!")))
+        tree = ast.parse(source)
+        modules = {(a.asname or a.name).split(".")[0] for node in ast.walk(tree)
+                   if isinstance(node, ast.Import) for a in node.names}
+        modules |= {a.asname or a.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
+                    for a in node.names}
+        bound = set()
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+                bound.add(node.name)
+            elif isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+                bound.add(node.id)
+        assert not modules & bound, (path.name, sorted(modules & bound))
