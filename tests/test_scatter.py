@@ -127,8 +127,8 @@ def test_clipped_members_are_counted():
     """A nominal fold angle near the flat strip with a uniform +-10 deg: the members past
     180 deg are clipped into the domain and counted."""
     sc = jd.Scatter(psi0_deg=10.0, distribution="uniform")
-    st = jd.scatter_statistics(176.0, 0.5, scatter=sc, samples=8, seed=0, n=N)
-    draws = sc.draws(8, 0)
+    st = jd.scatter_statistics(176.0, 0.5, scatter=sc, samples=16, seed=0, n=N)  # the fixture's program
+    draws = sc.draws(16, 0)
     np.testing.assert_array_equal(st.clipped, 176.0 + 10.0 * draws[:, 0] > 180.0)
     assert st.clipped.any() and np.all(st.members[:, 0] <= 180.0)
 
