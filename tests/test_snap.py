@@ -105,6 +105,14 @@ def test_cli_snap_angles_json(snap, capsys):
     assert rec["kind_up"] == "branch_point" and rec["kind2_up"] == "fold"
     # (a path whose start state does not exist, in the CLI: test_extrapolate.py, with the
     # extrapolated programs that test compiles anyway)
+    # clamps that differ (--alpha-right) are a misalignment kept while both turn: the same
+    # programs, the API's numbers, and the branch point unfolded into an earlier fold
+    assert main(["snap-angles", "--psi0", "60", "--gap", "0.5", "--alpha", "0.5", "--alpha-right", "-0.5",
+                 "--json", "--no-extrapolate"]) == 0
+    mis = json.loads(capsys.readouterr().out)
+    m = jr.snap_angles(jr.make_scene(60.0, 0.5, 0.5, alpha_right_deg=-0.5, n=100))
+    assert abs(mis["alpha_c_up_deg"] - np.degrees(float(m.up.alpha_c))) < 1e-9
+    assert mis["kind_up"] == "fold" and mis["alpha_c_up_deg"] < rec["alpha_c_up_deg"] - 0.5
 
 
 @pytest.mark.parametrize("settings, stop", [
