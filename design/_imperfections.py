@@ -77,7 +77,9 @@ def _with_amplitude(base, kind, amplitude):
 
 @jit
 def _batch(base, amplitudes, kind):
-    return jax.vmap(lambda a: jr.snap_angles(_with_amplitude(base, kind, a)))(amplitudes)
+    # the sensitivity differentiates nothing: the paths are not polished (the same angles,
+    # without the critical points' implicit derivatives and their verdicts)
+    return jax.vmap(lambda a: jr.snap_angles(_with_amplitude(base, kind, a), polish=False))(amplitudes)
 
 
 class DirectionSensitivity(eqx.Module):
