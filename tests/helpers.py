@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import contextlib
 import os
 import functools
@@ -228,3 +229,25 @@ def run_sweep_workers(tmp_path, jobs, devices, processes=1, timeout=600):
         assert p.returncode == 0, log[-3000:]
     paths = [result] + [f"{result}.{i}" for i in range(1, processes)]
     return [json.load(open(pth)) for pth in paths]
+
+
+def parse_source(text):
+    """`ast.parse` on a fresh thread: CPython 3.11.7's AST constructor checks its recursion
+    depth against the thread's, which an earlier test in the same worker can leave off
+    ("SystemError: AST constructor recursion depth mismatch", seen under pytest-xdist)."""
+    import threading
+
+    out = {}
+
+    def run():
+        try:
+            out["tree"] = ast.parse(text)
+        except BaseException as e:  # handed to the caller's thread
+            out["error"] = e
+
+    t = threading.Thread(target=run)
+    t.start()
+    t.join()
+    if "error" in out:
+        raise out["error"]
+    return out["tree"]

@@ -19,33 +19,13 @@ import sys
 
 import pytest
 
+from helpers import parse_source as _parse  # noqa: E402
+
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 # the shared base (results, _misc, _compile, _custom_types and the package root's own files) is layer 0
 RANK = {"model": 1, "energy": 2, "linalg": 3, "sweeps": 3, "statics": 4, "branches": 5, "dynamics": 6, "design": 7,
         "plot": 8, "paper": 9, "cli": 10}
 CORE = {"model", "energy", "linalg", "sweeps", "statics", "branches", "dynamics"}
-
-
-def _parse(text):
-    """`ast.parse` on a fresh thread: CPython 3.11.7's AST constructor checks its recursion
-    depth against the thread's, which an earlier test in the same worker can leave off
-    ("SystemError: AST constructor recursion depth mismatch", seen under pytest-xdist)."""
-    import threading
-
-    out = {}
-
-    def run():
-        try:
-            out["tree"] = ast.parse(text)
-        except BaseException as e:  # handed to the caller's thread
-            out["error"] = e
-
-    t = threading.Thread(target=run)
-    t.start()
-    t.join()
-    if "error" in out:
-        raise out["error"]
-    return out["tree"]
 
 
 def _modules():

@@ -49,23 +49,7 @@ def offences(text):
     return [name for name, pattern in PATTERNS.items() if pattern.search(flat)]
 
 
-def _parse(text):
-    """`ast.parse` on a fresh thread (as tests/test_layout.py: CPython 3.11.7's AST constructor
-    can see a recursion depth left over by an earlier test in the same worker)."""
-    out = {}
-
-    def run():
-        try:
-            out["tree"] = ast.parse(text)
-        except BaseException as e:  # noqa: BLE001 -- handed to the caller's thread
-            out["error"] = e
-
-    t = threading.Thread(target=run)
-    t.start()
-    t.join()
-    if "error" in out:
-        raise out["error"]
-    return out["tree"]
+from helpers import parse_source as _parse  # noqa: E402
 
 
 def _sources():
